@@ -1,0 +1,128 @@
+"""Topic registry and schema loading.
+
+Every channel a bearing-slam log may carry is listed in :data:`TOPICS` with the name of its
+schema. Schemas are JSON Schema files in ``data_schemas/schemas`` (project) and
+``data_schemas/foxglove`` (vendored Foxglove well-known schemas). :func:`schema_json` returns a
+schema with every local ``$ref`` inlined: that self-contained text is what an MCAP writer
+registers, so that Foxglove and other readers can use it without our files.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from typing import Any
+
+from data_schemas.errors import UnknownSchemaError
+
+SCHEMA_ENCODING = "jsonschema"
+MESSAGE_ENCODING = "json"
+
+#: MCAP metadata record holding the session document (key ``"json"``), written first.
+SESSION_METADATA_NAME = "bslam.session"
+
+
+@dataclass(frozen=True)
+class Topic:
+    """A channel of a bearing-slam log."""
+
+    name: str
+    schema: str
+    description: str
+
+
+_TOPIC_LIST = [
+    Topic(
+        "/camera/panorama",
+        "foxglove.CompressedImage",
+        "every captured frame, PNG (lossless); foxglove.RawImage 'bgr8' is accepted too",
+    ),
+    Topic(
+        "/robot/command",
+        "bslam.RobotCommand",
+        "each serial exchange: request, reply, outcome, latency",
+    ),
+    Topic("/robot/odometry", "bslam.Odometry", "wheel encoder counters"),
+    Topic(
+        "/robot/movement",
+        "bslam.Movement",
+        "movement index, phase (start/end), keyframe at rest, commanded turn and distance",
+    ),
+    Topic("/log", "foxglove.Log", "recorder events and faults"),
+    Topic(
+        "/sim/ground_truth",
+        "bslam.GroundTruth",
+        "simulation only: true robot pose x, y, heading (m, rad, world frame)",
+    ),
+]
+
+#: Topic name -> :class:`Topic`.
+TOPICS: dict[str, Topic] = {t.name: t for t in _TOPIC_LIST}
+
+#: Image schemas accepted on ``/camera/panorama``.
+IMAGE_SCHEMAS = ("foxglove.CompressedImage", "foxglove.RawImage")
+
+
+def _schema_file(name: str) -> str:
+    folder = "foxglove" if name.startswith("foxglove.") else "schemas"
+    path = resources.files("data_schemas").joinpath(folder, f"{name}.json")
+    if not path.is_file():
+        raise UnknownSchemaError(f"unknown schema {name!r}")
+    return path.read_text(encoding="utf-8")
+
+
+def _inline_refs(node: Any) -> Any:
+    if isinstance(node, dict):
+        ref = node.get("$ref")
+        if isinstance(ref, str) and ref.endswith(".json"):
+            target = dict(schema_dict(ref[: -len(".json")]))
+            extra = {k: v for k, v in node.items() if k != "$ref"}
+            target.update(extra)
+            return target
+        return {k: _inline_refs(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_inline_refs(v) for v in node]
+    return node
+
+
+@cache
+def _schema_cached(name: str) -> dict[str, Any]:
+    result: dict[str, Any] = _inline_refs(json.loads(_schema_file(name)))
+    return result
+
+
+def schema_dict(name: str) -> dict[str, Any]:
+    """The self-contained schema ``name`` (e.g. ``"bslam.Movement"``) as a fresh dict."""
+    return copy.deepcopy(_schema_cached(name))
+
+
+@cache
+def schema_json(name: str) -> bytes:
+    """The self-contained schema ``name`` as UTF-8 JSON bytes (what MCAP registers)."""
+    return json.dumps(_schema_cached(name), separators=(",", ":")).encode()
+
+
+def topic(name: str) -> Topic:
+    """Look up a registered topic; raise :class:`UnknownSchemaError` for an unknown one."""
+    try:
+        return TOPICS[name]
+    except KeyError:
+        raise UnknownSchemaError(
+            f"unknown topic {name!r}; known topics: {', '.join(sorted(TOPICS))}"
+        ) from None
+
+
+def register_topic(name: str, schema: str, description: str) -> Topic:
+    """Add a topic (e.g. a derived ``/pipeline/...`` channel); its schema file must exist."""
+    _schema_file(schema)
+    t = Topic(name, schema, description)
+    existing = TOPICS.get(name)
+    if existing is not None and existing.schema != schema:
+        raise UnknownSchemaError(
+            f"topic {name!r} is already registered with schema {existing.schema!r}"
+        )
+    TOPICS[name] = t
+    return t

@@ -1,0 +1,115 @@
+"""The session document: facts that hold for a whole log, stored as MCAP metadata.
+
+Written first by the recorder as metadata record ``bslam.session`` with a single key ``json``
+(so it survives a crash), validated against ``bslam.Session``. :class:`Session` is its typed view.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from data_schemas.calibration import Calibration, calibration_from_dict
+from data_schemas.codec import validate
+from data_schemas.errors import MissingMetadataError, SchemaError
+
+SCHEMA_VERSION = 1
+
+
+@dataclass(frozen=True)
+class LandmarkSpec:
+    """One entry of the landmark catalog: a name and a colour class (optional HSV override)."""
+
+    name: str
+    color: str
+    hsv_lo: tuple[int, int, int] | None = None
+    hsv_hi: tuple[int, int, int] | None = None
+
+
+@dataclass(frozen=True)
+class Session:
+    """Typed view of the session document (see ``data_schemas/schemas/bslam.Session.json``).
+
+    Attributes
+    ----------
+    landmarks : tuple of LandmarkSpec
+        The catalog, in log order.
+    reference : (str, str)
+        Names of the reference pair (L1 -> (0, 0), L2 -> (1, 0) in FL).
+    vision_error_rad : float
+        Bound eps on the bearing error.
+    calibration : Calibration
+        How image positions map to bearings.
+    doc : dict
+        The whole JSON document (robot settings, camera source, scenario, versions).
+    """
+
+    landmarks: tuple[LandmarkSpec, ...]
+    reference: tuple[str, str]
+    vision_error_rad: float
+    calibration: Calibration
+    simulated: bool
+    doc: dict[str, Any] = field(repr=False, compare=False)
+
+    @property
+    def scenario(self) -> dict[str, Any] | None:
+        """The simulation scenario, for simulated sessions."""
+        scenario: dict[str, Any] | None = self.doc.get("scenario")
+        return scenario
+
+    def landmark_names(self) -> list[str]:
+        """Catalog names in order."""
+        return [lm.name for lm in self.landmarks]
+
+    def to_json(self) -> str:
+        """The document as JSON text (what goes into the metadata record)."""
+        return json.dumps(self.doc, separators=(",", ":"))
+
+
+def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> Session:
+    """Validate a session document and build its typed view (raise SchemaError)."""
+    validate("bslam.Session", doc, what=what)
+    names = [lm["name"] for lm in doc["landmarks"]]
+    if len(set(names)) != len(names):
+        raise SchemaError(f"{what}: field 'landmarks': landmark names must be unique, got {names}")
+    ref = doc["reference"]
+    for r in ref:
+        if r not in names:
+            raise SchemaError(f"{what}: field 'reference': {r!r} is not in the landmark catalog")
+    if ref[0] == ref[1]:
+        raise SchemaError(f"{what}: field 'reference': the two reference landmarks must differ")
+    specs = []
+    for lm in doc["landmarks"]:
+        hsv = lm.get("hsv")
+        specs.append(
+            LandmarkSpec(
+                lm["name"],
+                lm["color"],
+                tuple(hsv["lo"]) if hsv else None,
+                tuple(hsv["hi"]) if hsv else None,
+            )
+        )
+    return Session(
+        landmarks=tuple(specs),
+        reference=(ref[0], ref[1]),
+        vision_error_rad=math.radians(float(doc["vision_error_deg"])),
+        calibration=calibration_from_dict(doc["camera"]["calibration"]),
+        simulated=bool(doc["simulated"]),
+        doc=doc,
+    )
+
+
+def session_from_metadata(metadata: dict[str, str]) -> Session:
+    """Build the session from the ``bslam.session`` metadata record's key/value map."""
+    text = metadata.get("json")
+    if text is None:
+        raise MissingMetadataError("session metadata record has no 'json' key")
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise MissingMetadataError(f"session metadata is not valid JSON ({exc})") from None
+    if not isinstance(doc, dict):
+        raise MissingMetadataError("session metadata is not a JSON object")
+    return session_from_doc(doc)

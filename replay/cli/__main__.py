@@ -1,0 +1,5 @@
+"""``python -m replay.cli`` is ``bslam``."""
+
+from replay.cli import main
+
+main()
