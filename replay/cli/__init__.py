@@ -16,7 +16,11 @@ import click
 from data_schemas.errors import BslamError
 
 #: command name -> "module:attribute". Add a command by adding a line here.
-COMMANDS: dict[str, str] = {}
+COMMANDS: dict[str, str] = {
+    "info": "replay.cli.info:info",
+    "recover": "replay.cli.recover:recover",
+    "record": "replay.cli.record:record",
+}
 
 
 class BslamGroup(click.Group):
