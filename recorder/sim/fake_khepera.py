@@ -145,9 +145,12 @@ class _Segment:
 
 
 def _garble(reply: bytes) -> bytes:
-    """Corrupt a reply the way a wrong baud rate does: high bits set, still ended by CR LF."""
+    """Corrupt a reply the way line noise does: high bits set, and stray bytes after the CR LF.
+
+    The stray bytes stay in the client's input buffer: only a resynchronisation removes them.
+    """
     body = reply.rstrip(b"\r\n")
-    return b"\xff" + bytes(b | 0x80 for b in body) + b"\r\n"
+    return b"\xff" + bytes(b | 0x80 for b in body) + b"\r\n\x80\xfe"
 
 
 class FakeKhepera:
