@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import termios
+import sys
 from collections.abc import Callable
 from types import TracebackType
 from typing import Any
@@ -47,7 +47,13 @@ _MISSING = {errno.ENOENT, errno.ENODEV, errno.ENXIO}
 _BUSY = {errno.EAGAIN, errno.EWOULDBLOCK, errno.EBUSY}
 _DENIED = {errno.EACCES, errno.EPERM}
 _DRAIN_MAX_READS = 64
-_LinkErrors = (serial.SerialException, OSError, termios.error)
+if sys.platform == "win32":
+    _LinkErrors: tuple[type[Exception], ...] = (serial.SerialException, OSError)
+else:
+    import termios
+
+    # pyserial lets termios.error (not an OSError) escape from a hung-up port
+    _LinkErrors = (serial.SerialException, OSError, termios.error)
 
 
 def _port_error(port: str, exc: Exception) -> SerialPortError:
@@ -131,8 +137,14 @@ class KheperaRobot:
     def open(
         cls, config: RobotConfig, clock: Clock, on_exchange: OnExchange | None = None
     ) -> KheperaRobot:
-        """Open ``config.port`` (:func:`open_serial`) and wrap it."""
-        return cls(open_serial(config), config, clock, on_exchange)
+        """Open ``config.port`` (:func:`open_serial`), discard stale input, and wrap it."""
+        port = open_serial(config)
+        try:
+            port.reset_input_buffer()
+        except _LinkErrors as exc:
+            port.close()
+            raise _port_error(config.port, exc) from None
+        return cls(port, config, clock, on_exchange)
 
     @property
     def config(self) -> RobotConfig:
