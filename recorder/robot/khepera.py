@@ -12,7 +12,8 @@ Every attempt of every exchange is reported to ``on_exchange`` as a ``/robot/com
 dict (``bslam.RobotCommand``): time stamp from the injected clock (monotonic), request and reply
 lines, outcome (``ok``, ``timeout``, ``garbled``, ``protocol_error``, ``disconnected``), latency
 and attempt number. A timeout or garbled reply is retried at most ``config.retries`` times, each
-after resynchronising the line (flush input, send a bare CR, drain until quiet). A ``z`` reply
+after resynchronising the line (flush input, send a bare CR, drain until quiet); the line is
+also resynchronised after the last failed attempt, so the next command starts clean. A ``z`` reply
 (protocol error) is not retried: the line is resynchronised and :class:`RobotProtocolError`
 raised. A port that vanishes raises :class:`RobotDisconnected`. Not thread-safe: one caller.
 """
@@ -234,6 +235,7 @@ class KheperaRobot:
         if self._disconnected:
             raise self._disconnect_error(text, "the port was lost earlier")
         attempts = cfg.retries + 1
+        failure: tuple[RobotTimeout | GarbledReply, str | None] | None = None
         for attempt in range(1, attempts + 1):
             t0_ns = self._clock.monotonic_ns()
             try:
@@ -261,13 +263,13 @@ class KheperaRobot:
             except (RobotTimeout, GarbledReply) as exc:
                 outcome = "timeout" if isinstance(exc, RobotTimeout) else "garbled"
                 self._report(t0_ns, text, reply_text, outcome, attempt, str(exc))
-                if attempt < attempts:
-                    self._resync(attempt)
-                    continue
-                raise self._final_error(exc, text, attempts, reply_text) from None
+                failure = (exc, reply_text)
+                self._resync(attempt)  # also after the last one: leave the line clean
+                continue
             self._report(t0_ns, text, reply_text, "ok", attempt, None)
             return reply
-        raise AssertionError("unreachable: the last attempt returns or raises")
+        assert failure is not None  # every attempt failed
+        raise self._final_error(failure[0], text, attempts, failure[1])
 
     def _final_error(
         self, exc: RobotTimeout | GarbledReply, text: str, attempts: int, reply_text: str | None

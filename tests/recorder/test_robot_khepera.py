@@ -138,6 +138,9 @@ def test_persistent_garbage_gives_up(robot: KheperaRobot, fake: FakeKhepera, log
     with pytest.raises(GarbledReply, match="garbled replies to 'K' after 3 attempts"):
         robot.motion_status()
     assert outcomes(log)[1:] == [("K", "garbled", a) for a in (1, 2, 3)]
+    # the line was resynchronised after the last failure too: the next command starts clean
+    assert robot.read_position_counters() == (0, 0)
+    assert outcomes(log)[-1] == ("H", "ok", 1)
 
 
 def test_protocol_error_is_not_retried(robot: KheperaRobot, fake: FakeKhepera, log: Log) -> None:
