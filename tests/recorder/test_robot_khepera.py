@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
+import os
+import termios
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -205,9 +208,15 @@ def test_unknown_url_scheme(clock: VirtualClock) -> None:
 
 
 def test_port_is_8n2_at_the_configured_baud(config: RobotConfig, clock: VirtualClock) -> None:
-    with KheperaRobot.open(RobotConfig(**{**config.__dict__, "baudrate": 38400}), clock) as r:
-        port = r._port  # the settings pyserial applied
-        assert (port.baudrate, port.bytesize, port.parity, port.stopbits) == (38400, 8, "N", 2)
+    with KheperaRobot.open(dataclasses.replace(config, baudrate=38400), clock):
+        fd = os.open(config.port, os.O_RDWR | os.O_NOCTTY)  # what the device was set to
+        try:
+            _, _, cflag, _, ispeed, ospeed, _ = termios.tcgetattr(fd)
+        finally:
+            os.close(fd)
+    assert (ispeed, ospeed) == (termios.B38400, termios.B38400)
+    assert cflag & termios.CSIZE == termios.CS8
+    assert cflag & termios.CSTOPB and not cflag & termios.PARENB
 
 
 @pytest.mark.parametrize(
