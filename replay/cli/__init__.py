@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "info": "replay.cli.info:info",
     "recover": "replay.cli.recover:recover",
     "record": "replay.cli.record:record",
+    "simulate": "replay.cli.simulate:simulate",
 }
 
 
