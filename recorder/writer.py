@@ -197,11 +197,14 @@ class LogWriter:
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
-            if (
+            full = (
                 self._pending_bytes >= self._chunk_bytes
                 or now - self._pending_since >= self._chunk_seconds
-            ):
+            )
+            if full:
                 self._commit()
+        if full:
+            self._sync()
         return log_time
 
     def flush(self) -> None:
@@ -368,26 +371,36 @@ def _json_bytes(msg: dict[str, Any]) -> bytes:
     """Compact JSON of ``msg``; long plain-ASCII strings (base64 frames) are copied verbatim.
 
     ``json.dumps`` scans every character of a multi-megabyte base64 string for escapes; a
-    string that is printable ASCII without quotes or backslashes encodes as itself, so it is
-    checked with fast ``str`` methods and spliced in.
+    string of printable ASCII without quotes or backslashes encodes as itself, so it is
+    checked with one ``bytes.translate`` pass and spliced in.
     """
-    long_keys = [
-        k for k, v in msg.items() if isinstance(v, str) and len(v) > _SPLICE_CHARS and _plain(v)
-    ]
-    if not long_keys:
+    plain: dict[str, bytes] = {}
+    for key, value in msg.items():
+        if isinstance(value, str) and len(value) > _SPLICE_CHARS:
+            raw = _plain_ascii(value)
+            if raw is not None:
+                plain[key] = raw
+    if not plain:
         return json.dumps(msg, separators=(",", ":")).encode()
-    head = {k: v for k, v in msg.items() if k not in long_keys}
+    head = {k: v for k, v in msg.items() if k not in plain}
     parts = [json.dumps(head, separators=(",", ":")).encode()[:-1]]
-    for i, k in enumerate(long_keys):
+    for i, (key, raw) in enumerate(plain.items()):
         sep = b"," if head or i > 0 else b""
-        parts.append(sep + json.dumps(k).encode() + b':"' + msg[k].encode("ascii") + b'"')
+        parts.append(sep + json.dumps(key).encode() + b':"' + raw + b'"')
     parts.append(b"}")
     return b"".join(parts)
 
 
-def _plain(text: str) -> bool:
-    """True if JSON encodes ``text`` as itself between quotes."""
-    return text.isascii() and text.isprintable() and '"' not in text and "\\" not in text
+#: Bytes JSON writes as themselves inside a string.
+_JSON_PLAIN = bytes(c for c in range(0x20, 0x7F) if c not in b'"\\')
+
+
+def _plain_ascii(text: str) -> bytes | None:
+    """``text`` as ASCII bytes if JSON encodes it as itself between quotes, else None."""
+    if not text.isascii():
+        return None
+    raw = text.encode("ascii")
+    return None if raw.translate(None, _JSON_PLAIN) else raw
 
 
 def _fileno(stream: IO[bytes]) -> int | None:
