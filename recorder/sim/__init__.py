@@ -1,0 +1,1 @@
+"""The simulated world: scenarios, arena geometry, movement planner, renderer, fake devices."""
