@@ -1,4 +1,14 @@
-"""Recursive fusion in FL: ``q_t = q_{t-1} p_t / ∫ q_{t-1} p_t`` (METHOD.md section 5).
+"""Recursive fusion in FL (METHOD.md section 5), two ways.
+
+:func:`fuse_likelihood` (the default of :class:`pipeline.BearingSlam`):
+``q_t = q_{t-1} L_t / ∫ q_{t-1} L_t`` with ``L_t`` this movement's bearing likelihood,
+marginalised over the movement's frame (:mod:`pipeline.likelihood`). Proposal: the shrinkage
+KDE of ``q_{t-1}`` (a regularised particle filter), so the importance weight is ``L_t`` alone;
+``n_proposal`` draws, one systematic resampling to ``n_l``.
+
+:func:`fuse` (the paper's literal product) ``q_t = q_{t-1} p_t / ∫ q_{t-1} p_t``, with ``p_t``
+the movement's FL particle set. Each ``p_t`` carries the range prior again, so the product
+counts the prior once per movement (a bias towards the reference pair; see docs/method.md).
 
 Both particle sets are turned into densities by a Gaussian kernel density estimate with Liu &
 West (2001) shrinkage: kernel centres ``a x_i + (1 - a) mean``, kernel covariance ``h^2 Cov``,
@@ -15,6 +25,7 @@ resampling to ``n_l`` particles.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,4 +128,41 @@ def fuse(
     lp = p.logpdf(x)
     log_w = lq + lp - np.logaddexp(lq + math.log(m_q), lp + math.log(max(m_p, 1)))
     w = np.exp(log_w - log_w.max())
+    return x[systematic_resample(w, n_l, rng)]
+
+
+#: Default proposal draws per output particle of :func:`fuse_likelihood`.
+PROPOSALS_PER_PARTICLE = 16
+
+
+def fuse_likelihood(
+    prev_fl: NDArray[np.float64],
+    likelihood: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    n_l: int,
+    rng: np.random.Generator,
+    *,
+    h: float | None = None,
+    n_proposal: int | None = None,
+) -> NDArray[np.float64] | None:
+    """Belief (n_l, 2) ``∝ q_{t-1} L_t``, or None if ``L_t`` is zero at every proposal.
+
+    Parameters
+    ----------
+    prev_fl : ndarray (n, 2)
+        Previous belief ``q_{t-1}`` (FL).
+    likelihood : callable
+        Points (m, 2) FL -> (m,) non-negative (an unbiased estimate is enough).
+    n_l : int
+        Output particles.
+    rng : numpy.random.Generator
+    h : float, optional
+        KDE bandwidth factor (default Scott, ``n^(-1/6)``).
+    n_proposal : int, optional
+        Draws from the KDE of ``prev_fl`` (default ``PROPOSALS_PER_PARTICLE * n_l``).
+    """
+    m = PROPOSALS_PER_PARTICLE * n_l if n_proposal is None else n_proposal
+    x = Kde.fit(prev_fl, h).sample(m, rng)
+    w = likelihood(x)
+    if not float(w.sum()) > 0.0:
+        return None
     return x[systematic_resample(w, n_l, rng)]

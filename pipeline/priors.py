@@ -40,6 +40,9 @@ AngularKind = Literal["gaussian", "uniform"]
 R_MIN_FR = 0.1
 R_MAX_FR = 20.0
 
+#: Points per block in :meth:`ImpartialPrior.density` (temporaries of 64 KiB).
+BLOCK = 8192
+
 
 class Prior(Protocol):
     """What every single-bearing prior provides."""
@@ -126,30 +129,66 @@ class ImpartialPrior:
             return np.where(inside, scale * np.exp(-0.5 / (s * s) * da * da), 0.0)
         return np.where(inside, scale, 0.0)
 
+    def g_product(
+        self, da1_rad: NDArray[np.float64], da2_rad: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """``g(da1) g(da2)`` elementwise (one exponential): the likelihood of two bearings."""
+        sq1 = da1_rad * da1_rad
+        sq2 = da2_rad * da2_rad
+        inside = np.maximum(sq1, sq2) <= self.eps_rad * self.eps_rad
+        scale = (self._norm * (self.r_max - self.r_min)) ** 2
+        if self.angular == "gaussian":
+            sq1 += sq2
+            sq1 *= -0.5 / (self.sigma_frac * self.eps_rad) ** 2
+            out: NDArray[np.float64] = np.exp(sq1, out=sq1)
+            out *= inside
+            out *= scale
+            return out
+        return np.where(inside, scale, 0.0)
+
     def density(
         self, points: NDArray[np.float64], origin: NDArray[np.float64], bearing_rad: float
     ) -> NDArray[np.float64]:
-        """``g(a) / ((r_max - r_min) r)`` inside the cone, 0 outside; points (n, 2) -> (n,)."""
+        """``g(a) / ((r_max - r_min) r)`` inside the cone, 0 outside; points (n, 2) -> (n,).
+
+        Works in blocks of ``BLOCK`` points so that every temporary stays in the allocator's
+        heap and the cache (fresh large arrays cost page faults: half the time at 100k points).
+        """
         p = np.asarray(points, dtype=np.float64)
         c, s = math.cos(bearing_rad), math.sin(bearing_rad)
-        dx = p[:, 0] - origin[0]
-        dy = p[:, 1] - origin[1]
-        along = dx * c + dy * s  # coordinates in the ray's frame
-        across = dy * c - dx * s
-        r2 = along * along + across * across
-        t = math.tan(self.eps_rad)
-        # cheap cone test first: along > 0 and |across| <= tan(eps) along, r in range
-        inside = (np.abs(across) <= t * along) & (r2 >= self.r_min**2) & (r2 <= self.r_max**2)
-        out = np.zeros(p.shape[0])
-        a_in = along[inside]
-        x_in = across[inside]
-        r_in = np.sqrt(r2[inside])
-        if self.angular == "gaussian":
-            da = np.arctan(x_in / a_in)
-            sig = self.sigma_frac * self.eps_rad
-            out[inside] = self._norm * np.exp((-0.5 / (sig * sig)) * da * da) / r_in
-        else:
-            out[inside] = self._norm / r_in
+        ox, oy = float(origin[0]), float(origin[1])
+        a0, x0 = ox * c + oy * s, oy * c - ox * s  # the origin in the ray's frame
+        tan_eps = math.tan(self.eps_rad)
+        lo2, hi2 = self.r_min**2, self.r_max**2
+        k = -0.5 / (self.sigma_frac * self.eps_rad) ** 2
+        out = np.empty(p.shape[0])
+        for start in range(0, p.shape[0], BLOCK):
+            blk = p[start : start + BLOCK]
+            along = blk[:, 0] * c
+            along += blk[:, 1] * s
+            along -= a0
+            across = blk[:, 1] * c
+            across -= blk[:, 0] * s
+            across -= x0
+            # cheap cone test on every point, the rest only inside the wedge
+            idx = np.flatnonzero(np.abs(across) <= tan_eps * along)
+            a_in = along[idx]
+            x_in = across[idx]
+            r2 = a_in * a_in
+            r2 += x_in * x_in
+            val = np.zeros(idx.size)
+            keep = np.flatnonzero((r2 >= lo2) & (r2 <= hi2))
+            r_in = np.sqrt(r2[keep])
+            if self.angular == "gaussian":
+                da = np.arctan(x_in[keep] / a_in[keep])
+                da *= da
+                da *= k
+                val[keep] = np.exp(da, out=da) / r_in
+            else:
+                val[keep] = 1.0 / r_in
+            res = out[start : start + BLOCK]
+            res[:] = 0.0
+            res[idx] = val * self._norm
         return out
 
     def sample_angle(self, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
@@ -307,14 +346,18 @@ def make_prior(
     r_max: float = R_MAX_FR,
     *,
     angular: AngularKind = "gaussian",
+    sigma_frac: float = 0.5,
 ) -> Prior:
-    """Build a prior by name (``"impartial"``, ``"gaussian"`` or ``"mixture"``)."""
+    """Build a prior by name (``"impartial"``, ``"gaussian"`` or ``"mixture"``).
+
+    ``sigma_frac``: angular std as a fraction of ``eps`` (all three priors).
+    """
     if name == "impartial":
-        return ImpartialPrior(eps_rad, r_min, r_max, angular=angular)
+        return ImpartialPrior(eps_rad, r_min, r_max, angular=angular, sigma_frac=sigma_frac)
     if name == "gaussian":
-        return GaussianPrior(eps_rad, r_min, r_max)
+        return GaussianPrior(eps_rad, r_min, r_max, sigma_frac=sigma_frac)
     if name == "mixture":
-        return MixturePrior(eps_rad, r_min, r_max)
+        return MixturePrior(eps_rad, r_min, r_max, sigma_frac=sigma_frac)
     raise EstimationError(f"unknown prior {name!r}; use 'impartial', 'gaussian' or 'mixture'")
 
 

@@ -17,17 +17,32 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.errors import EstimationError
-from pipeline.cones import O1_FR, O2_FR, Degenerate, intersect_cones, vision_cone_polygon
+from pipeline.cones import (
+    O1_FR,
+    O2_FR,
+    ConeIntersection,
+    Degenerate,
+    intersect_cones,
+    vision_cone_polygon,
+)
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import FrameChange, change_frame
-from pipeline.fusion import fuse
-from pipeline.init_fr import initialize_fr
-from pipeline.priors import R_MAX_FR, R_MIN_FR, PriorName, make_prior
+from pipeline.fusion import fuse, fuse_likelihood
+from pipeline.init_fr import initialize_fr, sample_fr_posterior
+from pipeline.likelihood import N_FRAMES, frame_marginal_likelihood
+from pipeline.priors import R_MAX_FR, R_MIN_FR, ImpartialPrior, PriorName, make_prior
+
+Fusion = Literal["likelihood", "product"]
+
+#: Default FR particles per reference landmark for the frame marginalisation.
+N_FRAME_POOL = 1024
 
 
 @dataclass(frozen=True)
@@ -57,6 +72,11 @@ class MovementResult:
     status : str
         ``"ok"`` or ``"skipped: <reason>"`` (state unchanged).
     skipped_landmarks : dict of name -> reason
+        Landmarks without an FR particle set this movement (not seen, degenerate cones, ...).
+    fused : list of str
+        Landmarks whose belief this movement changed (started or updated). With
+        ``fusion="likelihood"`` a landmark with degenerate cones is still fused once it has a
+        belief: its bearings' likelihood needs no bounded ``A_i``.
     cones_fr : dict of name -> (cone at O1, cone at O2), polygons (k, 2) FR
     particles_fr : dict of name -> (n_r, 2) FR, reference pair included
     particles_fl : dict of name -> (n_l, 2) FL, this movement's ``p_t`` (non-reference)
@@ -70,6 +90,7 @@ class MovementResult:
     index: int
     status: str
     skipped_landmarks: dict[str, str] = field(default_factory=dict)
+    fused: list[str] = field(default_factory=list)
     cones_fr: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
         default_factory=dict
     )
@@ -103,6 +124,20 @@ class BearingSlam:
     rng : numpy.random.Generator
     r_min, r_max : float
         Range bounds of the vision cones in FR units (movement length = 1).
+    fusion : {"likelihood", "product"}
+        ``"likelihood"`` (default): fuse each movement's bearing likelihood, marginalised over
+        the movement's frame (prior counted once); ``"product"``: the paper's product of the
+        belief with each movement's FL set (counts the range prior at every movement).
+    bearing_sigma_frac : float
+        Std of the Gaussian bearing-error density ``g`` as a fraction of ``eps`` (truncated to
+        ``[-eps, eps]``); default 0.5 (the bound at two standard deviations).
+    n_proposal : int, optional
+        Proposal draws per likelihood fusion (default 16 ``n_l``).
+    n_frames : int
+        Frame pairs averaged per proposal in the likelihood (default 16).
+    n_frame_pool : int
+        FR particles of each reference landmark that resolve the movement's frame in the
+        likelihood (default 1024; drawn by :func:`pipeline.init_fr.sample_fr_posterior`).
     """
 
     def __init__(
@@ -118,6 +153,11 @@ class BearingSlam:
         rng: np.random.Generator,
         r_min: float = R_MIN_FR,
         r_max: float = R_MAX_FR,
+        fusion: Fusion = "likelihood",
+        bearing_sigma_frac: float = 0.5,
+        n_proposal: int | None = None,
+        n_frames: int = N_FRAMES,
+        n_frame_pool: int = N_FRAME_POOL,
     ) -> None:
         names = list(landmarks)
         if len(set(names)) != len(names):
@@ -132,10 +172,24 @@ class BearingSlam:
             raise EstimationError(
                 f"frame_change must be 'sampled' or 'exact', got {frame_change!r}"
             )
+        if fusion not in ("likelihood", "product"):
+            raise EstimationError(f"fusion must be 'likelihood' or 'product', got {fusion!r}")
+        if not 0.0 < bearing_sigma_frac:
+            raise EstimationError(f"bearing_sigma_frac must be > 0, got {bearing_sigma_frac}")
+        if min(n_frames, n_frame_pool, n_l if n_proposal is None else n_proposal) < 1:
+            raise EstimationError(
+                f"need n_frames, n_frame_pool, n_proposal >= 1, got {n_frames}, "
+                f"{n_frame_pool}, {n_proposal}"
+            )
         self.landmarks = names
         self.reference = reference
         self.eps_rad = float(vision_error_rad)
-        self.prior = make_prior(prior, self.eps_rad, r_min, r_max)
+        self.prior = make_prior(prior, self.eps_rad, r_min, r_max, sigma_frac=bearing_sigma_frac)
+        self.noise = ImpartialPrior(self.eps_rad, r_min, r_max, sigma_frac=bearing_sigma_frac)
+        self.fusion: Fusion = fusion
+        self.n_proposal = n_proposal
+        self.n_frames = n_frames
+        self.n_frame_pool = n_frame_pool
         self.n_r = n_r
         self.n_l = n_l
         self.frame_change: FrameChange = frame_change
@@ -145,8 +199,9 @@ class BearingSlam:
         self.used_movements: list[int] = []
 
     def _initialize(
-        self, obs: MovementObservation, res: MovementResult
+        self, obs: MovementObservation, res: MovementResult, regions: dict[str, ConeIntersection]
     ) -> dict[str, NDArray[np.float64]]:
+        """FR particle sets of every usable landmark; fills ``regions`` with their ``A_i``."""
         pr = self.prior
         out: dict[str, NDArray[np.float64]] = {}
         for name in sorted(set(obs.bearings_o1_rad) | set(obs.bearings_o2_rad)):
@@ -174,7 +229,41 @@ class BearingSlam:
                 res.skipped_landmarks[name] = s.reason
                 continue
             out[name] = s
+            regions[name] = region
         return out
+
+    def _frame_sets(
+        self, regions: dict[str, ConeIntersection]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """Fine FR sets (n_frame_pool, 2) of the reference pair: the movement's frame."""
+        out = []
+        for ref in self.reference:
+            s = sample_fr_posterior(
+                regions[ref], self.prior, self.noise, self.n_frame_pool, self.rng
+            )
+            if isinstance(s, Degenerate):
+                return None
+            out.append(s)
+        return out[0], out[1]
+
+    def _fuse_likelihood(
+        self,
+        prev: NDArray[np.float64],
+        frames: tuple[NDArray[np.float64], NDArray[np.float64]],
+        b1: float,
+        b2: float,
+    ) -> NDArray[np.float64] | None:
+        lik = partial(
+            frame_marginal_likelihood,
+            ref1_fr=frames[0],
+            ref2_fr=frames[1],
+            bearing_o1_rad=b1,
+            bearing_o2_rad=b2,
+            noise=self.noise,
+            rng=self.rng,
+            n_frames=self.n_frames,
+        )
+        return fuse_likelihood(prev, lik, self.n_l, self.rng, n_proposal=self.n_proposal)
 
     def process_movement(self, obs: MovementObservation) -> MovementResult:
         """Initialize every visible landmark in FR, move to FL and fuse into the belief.
@@ -183,7 +272,8 @@ class BearingSlam:
         ``"skipped: <reason>"`` and leaves the state unchanged.
         """
         res = MovementResult(obs.index, "ok")
-        sets_fr = self._initialize(obs, res)
+        regions: dict[str, ConeIntersection] = {}
+        sets_fr = self._initialize(obs, res, regions)
         res.particles_fr = sets_fr
         for ref in self.reference:
             if ref not in sets_fr:
@@ -194,9 +284,28 @@ class BearingSlam:
         l1, l2 = self.reference
         others = {k: v for k, v in sets_fr.items() if k not in self.reference}
         fl = change_frame(sets_fr[l1], sets_fr[l2], others, self.n_l, self.rng, self.frame_change)
-        for name, p_t in fl.landmarks_fl.items():
+        frames = None if self.fusion == "product" else self._frame_sets(regions)
+        for name in self.landmarks:
+            if name in self.reference:
+                continue
             prev = self._belief.get(name)
-            self._belief[name] = p_t if prev is None else fuse(prev, p_t, self.n_l, self.rng)
+            p_t = fl.landmarks_fl.get(name)
+            if prev is None or frames is None:
+                if p_t is not None:
+                    new = p_t if prev is None else fuse(prev, p_t, self.n_l, self.rng)
+                    self._belief[name] = new
+                    res.fused.append(name)
+                continue
+            b1 = obs.bearings_o1_rad.get(name)
+            b2 = obs.bearings_o2_rad.get(name)
+            if b1 is None or b2 is None or not (math.isfinite(b1) and math.isfinite(b2)):
+                continue
+            q = self._fuse_likelihood(prev, frames, float(b1), float(b2))
+            if q is None:
+                res.skipped_landmarks[name] = "bearings have zero likelihood under the belief"
+                continue
+            self._belief[name] = q
+            res.fused.append(name)
         self._trajectory.append((fl.o1_fl, fl.o2_fl))
         self.used_movements.append(obs.index)
         res.particles_fl = fl.landmarks_fl
