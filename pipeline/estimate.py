@@ -30,12 +30,20 @@ class LandmarkEstimate:
     cov_fl: NDArray[np.float64]
 
     @classmethod
-    def from_particles(cls, particles_fl: NDArray[np.float64]) -> LandmarkEstimate:
-        """Estimate from a particle set (n, 2) FL."""
+    def from_particles(
+        cls, particles_fl: NDArray[np.float64], *, weights: NDArray[np.float64] | None = None
+    ) -> LandmarkEstimate:
+        """Estimate from a particle set (n, 2) FL, equally weighted or with ``weights`` (n,).
+
+        Weighted: the covariance is divided by ``1 - sum w^2`` (``w`` normalised), which is
+        ``(n - 1) / n`` for equal weights (the unbiased sample covariance).
+        """
         x = np.asarray(particles_fl, dtype=np.float64)
-        mean = x.mean(axis=0)
+        n = x.shape[0]
+        w = np.full(n, 1.0 / n) if weights is None else weights / weights.sum()
+        mean = w @ x
         d = x - mean
-        return cls(mean, (d.T @ d) / max(x.shape[0] - 1, 1))
+        return cls(mean, ((d * w[:, None]).T @ d) / max(1.0 - float(w @ w), 1e-12))
 
     def mahalanobis2(self, point_fl: NDArray[np.float64]) -> float:
         """Squared Mahalanobis distance of a point (2,) from the mean."""

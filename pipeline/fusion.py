@@ -135,16 +135,47 @@ def fuse(
 PROPOSALS_PER_PARTICLE = 16
 
 
+def jittered_draws(
+    particles: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    m: int,
+    rng: np.random.Generator,
+    h: float | None = None,
+) -> NDArray[np.float64]:
+    """``m`` draws (m, 2) from the shrinkage KDE of a weighted set (see :class:`Kde`).
+
+    Kernel centres ``a x_i + (1 - a) mean`` picked by systematic resampling of ``weights``,
+    kernel covariance ``h^2 Cov`` (weighted mean and covariance), ``h`` by default Scott's
+    factor of the effective sample size ``(sum w)^2 / sum w^2``.
+    """
+    w = weights / weights.sum()
+    mean = w @ particles
+    d = particles - mean
+    cov = (d * w[:, None]).T @ d
+    cov = cov + 1e-12 * max(float(np.trace(cov)), 1e-12) * np.eye(2)
+    hh = float(w @ w) ** (1.0 / 6.0) if h is None else h
+    a = math.sqrt(max(0.0, 1.0 - hh * hh))
+    centres = a * particles[systematic_resample(w, m, rng)] + (1.0 - a) * mean
+    chol = np.linalg.cholesky(hh * hh * cov)
+    out: NDArray[np.float64] = centres + rng.standard_normal((m, 2)) @ chol.T
+    return out
+
+
 def fuse_likelihood(
     prev_fl: NDArray[np.float64],
     likelihood: Callable[[NDArray[np.float64]], NDArray[np.float64]],
     n_l: int,
     rng: np.random.Generator,
     *,
+    prev_weights: NDArray[np.float64] | None = None,
     h: float | None = None,
     n_proposal: int | None = None,
-) -> NDArray[np.float64] | None:
-    """Belief (n_l, 2) ``∝ q_{t-1} L_t``, or None if ``L_t`` is zero at every proposal.
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """Weighted belief ``∝ q_{t-1} L_t``: (points (m, 2), weights (m,)), or None if ``L_t = 0``.
+
+    The ``m`` proposals are kept with their weights (no reduction to ``n_l`` in between, which
+    would throw away diversity at every movement); resample with
+    :func:`pipeline.resample.systematic_resample` for an equally weighted set.
 
     Parameters
     ----------
@@ -153,16 +184,19 @@ def fuse_likelihood(
     likelihood : callable
         Points (m, 2) FL -> (m,) non-negative (an unbiased estimate is enough).
     n_l : int
-        Output particles.
+        Particles of the belief; ``m`` defaults to ``PROPOSALS_PER_PARTICLE * n_l``.
     rng : numpy.random.Generator
+    prev_weights : ndarray (n,), optional
+        Weights of ``prev_fl`` (default equal).
     h : float, optional
-        KDE bandwidth factor (default Scott, ``n^(-1/6)``).
+        KDE bandwidth factor (default Scott of the effective sample size).
     n_proposal : int, optional
-        Draws from the KDE of ``prev_fl`` (default ``PROPOSALS_PER_PARTICLE * n_l``).
+        Draws ``m`` from the KDE of ``prev_fl``.
     """
     m = PROPOSALS_PER_PARTICLE * n_l if n_proposal is None else n_proposal
-    x = Kde.fit(prev_fl, h).sample(m, rng)
+    w_prev = np.ones(prev_fl.shape[0]) if prev_weights is None else prev_weights
+    x = jittered_draws(prev_fl, w_prev, m, rng, h)
     w = likelihood(x)
     if not float(w.sum()) > 0.0:
         return None
-    return x[systematic_resample(w, n_l, rng)]
+    return x, w

@@ -89,7 +89,7 @@ def frame_marginal_likelihood(
     rot1 = np.complex64(np.exp(-1j * bearing_o1_rad))  # turns the measured ray onto +x
     rot2 = np.complex64(np.exp(-1j * bearing_o2_rad))
     x_all = (points_fl[:, 0] + 1j * points_fl[:, 1]).astype(np.complex64)[:, None]
-    shift = rng.integers(0, n_frames, m)
+    shift = rng.integers(0, n_frames, (m,))
     out = np.empty(m)
     rows = max(1, BLOCK_PAIRS // n_frames)  # blocks keep temporaries small (no page faults)
     for start in range(0, m, rows):

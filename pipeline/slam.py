@@ -38,6 +38,7 @@ from pipeline.fusion import fuse, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
 from pipeline.likelihood import N_FRAMES, frame_marginal_likelihood
 from pipeline.priors import R_MAX_FR, R_MIN_FR, ImpartialPrior, PriorName, make_prior
+from pipeline.resample import systematic_resample
 
 Fusion = Literal["likelihood", "product"]
 
@@ -174,7 +175,7 @@ class BearingSlam:
             )
         if fusion not in ("likelihood", "product"):
             raise EstimationError(f"fusion must be 'likelihood' or 'product', got {fusion!r}")
-        if not 0.0 < bearing_sigma_frac:
+        if not bearing_sigma_frac > 0.0:
             raise EstimationError(f"bearing_sigma_frac must be > 0, got {bearing_sigma_frac}")
         if min(n_frames, n_frame_pool, n_l if n_proposal is None else n_proposal) < 1:
             raise EstimationError(
@@ -195,6 +196,8 @@ class BearingSlam:
         self.frame_change: FrameChange = frame_change
         self.rng = rng
         self._belief: dict[str, NDArray[np.float64]] = {}
+        # the same beliefs as weighted sets (all proposals of the last likelihood fusion)
+        self._weighted: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         self._trajectory: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
         self.used_movements: list[int] = []
 
@@ -248,11 +251,11 @@ class BearingSlam:
 
     def _fuse_likelihood(
         self,
-        prev: NDArray[np.float64],
+        prev: tuple[NDArray[np.float64], NDArray[np.float64]],
         frames: tuple[NDArray[np.float64], NDArray[np.float64]],
         b1: float,
         b2: float,
-    ) -> NDArray[np.float64] | None:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
         lik = partial(
             frame_marginal_likelihood,
             ref1_fr=frames[0],
@@ -263,7 +266,9 @@ class BearingSlam:
             rng=self.rng,
             n_frames=self.n_frames,
         )
-        return fuse_likelihood(prev, lik, self.n_l, self.rng, n_proposal=self.n_proposal)
+        return fuse_likelihood(
+            prev[0], lik, self.n_l, self.rng, prev_weights=prev[1], n_proposal=self.n_proposal
+        )
 
     def process_movement(self, obs: MovementObservation) -> MovementResult:
         """Initialize every visible landmark in FR, move to FL and fuse into the belief.
@@ -288,12 +293,12 @@ class BearingSlam:
         for name in self.landmarks:
             if name in self.reference:
                 continue
-            prev = self._belief.get(name)
+            prev = self._weighted.get(name)
             p_t = fl.landmarks_fl.get(name)
             if prev is None or frames is None:
                 if p_t is not None:
-                    new = p_t if prev is None else fuse(prev, p_t, self.n_l, self.rng)
-                    self._belief[name] = new
+                    new = p_t if prev is None else fuse(prev[0], p_t, self.n_l, self.rng)
+                    self._set_belief(name, new, np.ones(new.shape[0]))
                     res.fused.append(name)
                 continue
             b1 = obs.bearings_o1_rad.get(name)
@@ -304,7 +309,7 @@ class BearingSlam:
             if q is None:
                 res.skipped_landmarks[name] = "bearings have zero likelihood under the belief"
                 continue
-            self._belief[name] = q
+            self._set_belief(name, *q)
             res.fused.append(name)
         self._trajectory.append((fl.o1_fl, fl.o2_fl))
         self.used_movements.append(obs.index)
@@ -314,6 +319,15 @@ class BearingSlam:
         res.estimates = self.estimates
         return res
 
+    def _set_belief(
+        self, name: str, particles_fl: NDArray[np.float64], weights: NDArray[np.float64]
+    ) -> None:
+        self._weighted[name] = (particles_fl, weights)
+        if particles_fl.shape[0] == self.n_l and np.all(weights == weights[0]):
+            self._belief[name] = particles_fl
+        else:
+            self._belief[name] = particles_fl[systematic_resample(weights, self.n_l, self.rng)]
+
     @property
     def belief_fl(self) -> dict[str, NDArray[np.float64]]:
         """Current belief per non-reference landmark: (n_l, 2) FL."""
@@ -322,7 +336,9 @@ class BearingSlam:
     @property
     def estimates(self) -> dict[str, LandmarkEstimate]:
         """Current estimate per non-reference landmark seen so far."""
-        return {k: LandmarkEstimate.from_particles(v) for k, v in self._belief.items()}
+        return {
+            k: LandmarkEstimate.from_particles(x, weights=w) for k, (x, w) in self._weighted.items()
+        }
 
     @property
     def trajectory_fl(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
