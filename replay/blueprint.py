@@ -30,7 +30,7 @@ def method_blueprint(*, fig1_priors: tuple[str, ...] = ()) -> rrb.Blueprint:
             row_shares=[2, 3],
         ),
         rrb.Vertical(
-            rrb.Spatial2DView(origin="/", contents="/fr/**", name="Movement in FR: cones, particles"),
+            rrb.Spatial2DView(origin="/", contents="/fr/**", name="One movement in FR"),
             rrb.TextLogView(origin="/log", name="Skipped"),
             row_shares=[4, 1],
         ),
@@ -45,8 +45,7 @@ def method_blueprint(*, fig1_priors: tuple[str, ...] = ()) -> rrb.Blueprint:
     parts: list[rrb.Container] = [method]
     if fig1_priors:
         densities = [
-            rrb.Spatial2DView(origin=f"/fig1/density/{p}", name=f"{p} density")
-            for p in fig1_priors
+            rrb.Spatial2DView(origin=f"/fig1/density/{p}", name=f"{p} density") for p in fig1_priors
         ]
         parts.append(
             rrb.Vertical(
