@@ -17,6 +17,9 @@ from data_schemas.errors import BslamError
 
 #: command name -> "module:attribute". Add a command by adding a line here.
 COMMANDS: dict[str, str] = {
+    "info": "replay.cli.info:info",
+    "recover": "replay.cli.recover:recover",
+    "record": "replay.cli.record:record",
     "process": "replay.cli.process:process",
     "replay": "replay.cli.replay_log:replay",
     "regress": "replay.cli.regress:regress",
