@@ -7,7 +7,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from logfactory import write_log  # noqa: E402
+from logfactory import write_log
 
 
 @pytest.fixture(scope="session")

@@ -97,7 +97,7 @@ def test_fr_particles_and_map_values(replayed: tuple[Path, dict[str, Any]]) -> N
     assert len(fr) == len(MOVES) and all(len(p) == 50 for p in fr)
     fl = _column(rows["/map/particles/L4"], "Points2D:positions")
     assert all(len(p) == 100 for p in fl)
-    est = [r for r in rows["/map/estimates"] if r.get("movement") == len(MOVES) - 1][0]
+    est = next(r for r in rows["/map/estimates"] if r.get("movement") == len(MOVES) - 1)
     logged = dict(zip(est["Points2D:labels"], est["Points2D:positions"], strict=True))
     for name, e in doc["landmarks"].items():
         assert logged[name] == pytest.approx(e["mean"], abs=1e-5)  # float32 in Rerun
