@@ -1,1 +1,4 @@
-"""Simulated world: scenarios, arena geometry, movement planner, renderer, and the fake robot and camera that let the recorder run without hardware."""
+"""Simulated world: scenarios, arena geometry, movement planner, renderer, fake robot and camera.
+
+They let the recorder run without hardware.
+"""
