@@ -110,6 +110,7 @@ def run_jobs(
     workers: int = 1,
     scheduler: str | None = None,
     job_fn: Callable[[LogJob], LogOutcome] = run_job,
+    connect_timeout: str = "10s",
 ) -> Iterator[LogOutcome]:
     """Run jobs and yield outcomes as they complete.
 
@@ -122,9 +123,11 @@ def run_jobs(
         Address of a Dask scheduler (``tcp://host:8786``); overrides ``workers``.
     job_fn : callable
         The per-log function (a module-level function, so that it pickles).
+    connect_timeout : str
+        How long to try reaching the Dask scheduler (Dask duration, e.g. ``"10s"``).
     """
     if scheduler is not None:
-        yield from _run_dask(jobs, scheduler, job_fn)
+        yield from _run_dask(jobs, scheduler, job_fn, connect_timeout)
     elif workers <= 1 or len(jobs) == 1:
         for job in jobs:
             yield job_fn(job)
@@ -140,13 +143,16 @@ class SchedulerError(BslamError):
 
 
 def _run_dask(
-    jobs: Sequence[LogJob], scheduler: str, job_fn: Callable[[LogJob], LogOutcome]
+    jobs: Sequence[LogJob],
+    scheduler: str,
+    job_fn: Callable[[LogJob], LogOutcome],
+    connect_timeout: str,
 ) -> Iterator[LogOutcome]:
     from distributed import Client
     from distributed import as_completed as dask_as_completed
 
     try:
-        client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
+        client = Client(scheduler, timeout=connect_timeout)  # type: ignore[no-untyped-call]
     except (OSError, TimeoutError) as exc:
         raise SchedulerError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
     with client:

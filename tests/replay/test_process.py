@@ -13,7 +13,7 @@ from logfactory import MOVES, write_log
 from mcap.reader import make_reader
 
 from data_schemas.codec import validate_message
-from replay.batch import LogJob, expand_logs, plan_jobs, run_jobs
+from replay.batch import LogJob, SchedulerError, expand_logs, plan_jobs, run_jobs
 from replay.cli import cli
 from replay.process import process_log
 from replay.records import MethodConfig
@@ -146,12 +146,9 @@ def test_dask_local_cluster_gives_same_results(tmp_path: Path) -> None:
 
 
 def test_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
-    logs = [write_log(tmp_path / f"u{i}.mcap") for i in range(2)]
-    result = CliRunner().invoke(
-        cli, ["process", *map(str, logs), "--scheduler", "tcp://127.0.0.1:9"]
-    )
-    assert result.exit_code == 1
-    assert "cannot reach the Dask scheduler" in result.output
+    jobs = plan_jobs([write_log(tmp_path / "u.mcap")], None, None, MethodConfig())
+    with pytest.raises(SchedulerError, match=r"^cannot reach the Dask scheduler at tcp://127"):
+        list(run_jobs(jobs, scheduler="tcp://127.0.0.1:9", connect_timeout="1s"))
 
 
 def test_job_is_picklable() -> None:
