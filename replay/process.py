@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import LogError
+from replay.logs import ProcessableLog
 from replay.records import MethodConfig, Sink
 from replay.sinks.derived import DerivedLogSink
 from replay.sinks.summary import SummarySink
@@ -33,7 +34,7 @@ def write_json(path: str | os.PathLike[str], doc: dict[str, Any]) -> None:
 
 
 def process_log(
-    log: str | os.PathLike[str],
+    log: str | os.PathLike[str] | ProcessableLog,
     method: MethodConfig,
     *,
     out: str | os.PathLike[str] | None = None,
@@ -44,8 +45,8 @@ def process_log(
 
     Parameters
     ----------
-    log : path
-        A finished bearing-slam log.
+    log : path or ProcessableLog
+        A finished bearing-slam log (a path, or one already opened).
     method : MethodConfig
         Prior, particle counts and seed.
     out : path, optional
@@ -58,7 +59,8 @@ def process_log(
     summary_sink = SummarySink()
     sinks: list[Sink] = [summary_sink, *extra_sinks]
     if out is not None:
-        if Path(out).resolve() == Path(log).resolve():
+        source = log.path if isinstance(log, ProcessableLog) else Path(log)
+        if Path(out).resolve() == source.resolve():
             raise LogError(f"{log}: --out would overwrite the source log; choose another path")
         sinks.append(DerivedLogSink(out))
     run_log(log, method, sinks)

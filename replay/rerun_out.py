@@ -11,7 +11,6 @@ import rerun as rr
 
 from data_schemas.errors import BslamError
 from replay.blueprint import method_blueprint
-from replay.fig1 import log_fig1
 from replay.logs import ProcessableLog
 from replay.process import process_log
 from replay.records import PRIORS, MethodConfig
@@ -53,7 +52,7 @@ def open_recording(name: str, target: RerunTarget) -> tuple[rr.RecordingStream, 
 
 
 def replay_log(
-    log: str | os.PathLike[str],
+    log: str | os.PathLike[str] | ProcessableLog,
     method: MethodConfig,
     rec: rr.RecordingStream,
     *,
@@ -61,13 +60,10 @@ def replay_log(
     out: str | os.PathLike[str] | None = None,
     summary: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
-    """Stream every stage of ``log`` to ``rec`` (plus Fig. 1); return the summary document.
+    """Stream every stage of ``log`` to ``rec`` (and Fig. 1); return the summary document.
 
     ``out`` and ``summary``, if given, also receive the derived log and the summary JSON.
     """
-    with ProcessableLog(log) as opened:
-        eps_rad = opened.session.vision_error_rad
-    log_fig1(rec, eps_rad)
     sink = RerunSink(rec, images=images)
     return process_log(log, method, out=out, summary=summary, extra_sinks=(sink,))
 
@@ -76,8 +72,9 @@ def save_rrd(
     log: str | os.PathLike[str], method: MethodConfig, rrd: str | os.PathLike[str], **kw: Any
 ) -> dict[str, Any]:
     """Replay ``log`` into the file ``rrd`` (finished and closed on return)."""
-    rec, _ = open_recording(Path(log).stem, RerunTarget("save", os.fspath(rrd)))
-    try:
-        return replay_log(log, method, rec, **kw)
-    finally:
-        rec.disconnect()
+    with ProcessableLog(log) as opened:  # a bad log fails here, before the .rrd exists
+        rec, _ = open_recording(Path(log).stem, RerunTarget("save", os.fspath(rrd)))
+        try:
+            return replay_log(opened, method, rec, **kw)
+        finally:
+            rec.disconnect()

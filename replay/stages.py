@@ -242,7 +242,15 @@ class Runner:
         )
 
 
-def run_log(path: str | os.PathLike[str], method: MethodConfig, sinks: Sequence[Sink]) -> None:
-    """Run one log through the stages into ``sinks`` (each sink's ``finish`` is called)."""
-    with ProcessableLog(path) as log:
+def run_log(
+    log: str | os.PathLike[str] | ProcessableLog, method: MethodConfig, sinks: Sequence[Sink]
+) -> None:
+    """Run one log (a path, or a log already opened) through the stages into ``sinks``.
+
+    Each sink's ``finish`` is called, also after an error. A path is opened and closed here.
+    """
+    if isinstance(log, ProcessableLog):
         Runner(log, method, sinks).run()
+        return
+    with ProcessableLog(log) as opened:
+        Runner(opened, method, sinks).run()

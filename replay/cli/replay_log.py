@@ -56,13 +56,13 @@ def replay(
     target = RerunTarget(chosen[0] if chosen else "save", where)  # type: ignore[arg-type]
     show_skips()
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
-    ProcessableLog(log).close()  # a bad log fails here, before any output exists
-    rec, url = open_recording(log.stem, target)
-    try:
-        doc = replay_log(log, method, rec, images=not keyframes_only)
-    finally:
-        if not serve:
-            rec.disconnect()
+    with ProcessableLog(log) as opened:  # a bad log fails here, before any output exists
+        rec, url = open_recording(log.stem, target)
+        try:
+            doc = replay_log(opened, method, rec, images=not keyframes_only)
+        finally:
+            if not serve:
+                rec.disconnect()
     click.echo(f"{log}: {result_line(doc)}")
     if save:
         click.echo(f"wrote {save}; open it with: rerun {save}")

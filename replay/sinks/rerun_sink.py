@@ -17,6 +17,7 @@ Entities (the blueprint in :mod:`replay.blueprint` lays them out):
 ``map/truth/...``               simulated logs: true landmarks and trajectory, mapped to FL
 ``error/<name>``, ``error/mean`` distance of each estimate to the truth (m), simulated logs
 ``log``                         skipped movements and landmarks, with the reason
+``fig1/...``                    the paper's Fig. 1 for this log's eps (:mod:`replay.fig1`)
 =============================== ===================================================
 
 Rerun's 2-D views draw y downwards; the ``fr`` and ``map`` roots carry a static y-flip so FR and
@@ -35,6 +36,7 @@ from numpy.typing import NDArray
 from data_schemas.calibration import Calibration, UnwrappedCalibration
 from data_schemas.colors import NOMINAL_BGR
 from data_schemas.session import Session
+from replay.fig1 import log_fig1
 from replay.records import FrameRecord, MovementRecord, RunInfo
 
 LOG_TIME = "log_time"
@@ -109,6 +111,7 @@ class RerunSink:
         self._run = run
         s = run.session
         self._rgb = landmark_rgb(s)
+        log_fig1(self.rec, s.vision_error_rad)
         log = self.rec.log
         log("fr", Y_UP, static=True)
         log("map", Y_UP, static=True)
