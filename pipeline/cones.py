@@ -176,16 +176,17 @@ def intersect_cones(
     r_max: float,
 ) -> ConeIntersection | Degenerate:
     """``A_i`` from the bearings at O1 = (0, 0) and O2 = (1, 0) in FR, or why it is degenerate."""
-    b1, b2 = float(wrap_rad(bearing_o1_rad)), float(wrap_rad(bearing_o2_rad))
-    if not (math.isfinite(b1) and math.isfinite(b2)):
+    if not (math.isfinite(bearing_o1_rad) and math.isfinite(bearing_o2_rad)):
         return Degenerate("bearing is not a finite number")
+    b1, b2 = wrap_rad(float(bearing_o1_rad)), wrap_rad(float(bearing_o2_rad))
     parallax = float(wrap_rad(b2 - b1))
     if abs(parallax) <= 2.0 * eps_rad:
         return Degenerate(
             f"cones nearly parallel (parallax {math.degrees(parallax):.1f} deg <= 2 eps = "
             f"{math.degrees(2 * eps_rad):.1f} deg): landmark near the line of motion or too far"
         )
-    R = r_max
+    # the bounded wedge intersection lies within 1 / sin(|parallax| - 2 eps) of O1 (law of sines)
+    R = max(r_max, 2.0 / math.sin(min(abs(parallax) - 2.0 * eps_rad, 0.5 * math.pi)))
     poly: list[tuple[float, float]] = [(-R, -R), (R, -R), (R, R), (-R, R)]
     for o, b in ((O1_FR, b1), (O2_FR, b2)):
         for nx, ny, c in _wedge_halfplanes(o, b, eps_rad):
@@ -205,4 +206,8 @@ def intersect_cones(
         if d_max < r_min:
             return Degenerate(f"the cones meet only nearer than r_min = {r_min:g} movements")
         cut = cut or d_max > r_max
+    if r_max < R:  # keep the sampling polygon within the r_max box
+        for nx, ny in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+            poly = _clip(poly, nx, ny, r_max)
+        arr = np.asarray(poly, dtype=np.float64)
     return ConeIntersection(arr, (b1, b2), eps_rad, r_min, r_max, parallax, cut)

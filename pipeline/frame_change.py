@@ -10,8 +10,7 @@ distribution):
 
 * ``"exact"`` (the paper): enumerate all ``n_r^2`` pairs for O1 and O2 and all ``n_r^3`` triples
   for each other landmark, in chunks of at most ``chunk_elems`` triples (bounded memory), and
-  keep ``n_l`` of the triples by systematic resampling over the enumeration (a stratified
-  subsample: every ``s1`` contributes equally);
+  keep ``n_l`` of the triples drawn uniformly without replacement;
 * ``"sampled"``: draw ``n_l`` index triples ``(i, j, k)`` at random: O(n_l). O1 and O2 get the
   same ``n_l`` pairs ``(i, j)``, shared by all landmarks of the movement (joint samples).
 """
@@ -56,8 +55,8 @@ def to_fl(
     dy = s2[..., 1] - s1[..., 1]
     ux = z[..., 0] - s1[..., 0]
     uy = z[..., 1] - s1[..., 1]
-    inv = 1.0 / (dx * dx + dy * dy)
-    return np.stack(((ux * dx + uy * dy) * inv, (uy * dx - ux * dy) * inv), axis=-1)
+    n2 = dx * dx + dy * dy  # divide (not multiply by 1/n2) so s2 -> (1, 0) exactly
+    return np.stack(((ux * dx + uy * dy) / n2, (uy * dx - ux * dy) / n2), axis=-1)
 
 
 def _pairs_fl(
@@ -114,8 +113,9 @@ def change_frame_exact(
         block = n2 * nk  # triples per s1 index
         rows = max(1, chunk_elems // block)
         total = n1 * block
-        # systematic pointers into the enumeration (all triples equally weighted)
-        ptr = ((rng.random() + np.arange(n_l)) * (total / n_l)).astype(np.int64)
+        # a uniform subsample of the enumeration (all triples are equally weighted); systematic
+        # pointers would alias with the (i, j, k) ordering
+        ptr = np.sort(rng.choice(total, n_l, replace=n_l > total))
         res = np.empty((n_l, 2))
         for start in range(0, n1, rows):
             stop = min(n1, start + rows)

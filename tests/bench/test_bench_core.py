@@ -1,0 +1,97 @@
+"""Benchmarks of the estimation core (not in the default run: ``pytest tests/bench``).
+
+Each group has a yardstick measured in the same run (a plain numpy op of the same size);
+compare medians. Peak memory of the chunked exact change of frame is in ``extra_info``.
+"""
+
+from __future__ import annotations
+
+import math
+import tracemalloc
+from typing import Any
+
+import numpy as np
+import pytest
+
+from pipeline import BearingSlam
+from pipeline.frame_change import change_frame_exact, change_frame_sampled
+from pipeline.fusion import fuse
+from pipeline.priors import ImpartialPrior
+from pipeline.synthetic import PAPER_REFERENCE, simulate_bearings
+
+EPS = math.radians(3.0)
+
+
+def _sets(n_r: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    rng = np.random.default_rng(0)
+    return (
+        rng.normal([2.0, 3.0], 0.2, (n_r, 2)),
+        rng.normal([4.0, 3.5], 0.2, (n_r, 2)),
+        {"L3": rng.normal([1.0, 1.0], 0.3, (n_r, 2))},
+    )
+
+
+@pytest.mark.benchmark(group="yardstick")
+def test_yardstick_exp_100k(benchmark: Any) -> None:
+    x = np.random.default_rng(0).random(100_000)
+    benchmark(np.exp, x)
+
+
+@pytest.mark.benchmark(group="frame_change")
+@pytest.mark.parametrize("n_r", [50, 100, 200])
+def test_frame_change_exact(benchmark: Any, n_r: int) -> None:
+    s1, s2, others = _sets(n_r)
+    rng = np.random.default_rng(1)
+    tracemalloc.start()
+    change_frame_exact(s1, s2, others, 300, rng)
+    benchmark.extra_info["peak_mib"] = tracemalloc.get_traced_memory()[1] / 2**20
+    tracemalloc.stop()
+    benchmark(change_frame_exact, s1, s2, others, 300, rng)
+
+
+@pytest.mark.benchmark(group="frame_change")
+def test_frame_change_sampled(benchmark: Any) -> None:
+    s1, s2, others = _sets(50)
+    benchmark(change_frame_sampled, s1, s2, others, 300, np.random.default_rng(1))
+
+
+@pytest.mark.benchmark(group="pdf")
+def test_impartial_pdf_100k(benchmark: Any) -> None:
+    rng = np.random.default_rng(2)
+    prior = ImpartialPrior(EPS)
+    # points around a cone: a quarter inside it
+    r = rng.uniform(0.1, 20.0, 100_000)
+    a = 0.2 + rng.uniform(-4 * EPS, 4 * EPS, 100_000)
+    pts = np.column_stack((r * np.cos(a), r * np.sin(a)))
+    benchmark(prior.density, pts, np.zeros(2), 0.2)
+
+
+@pytest.mark.benchmark(group="fusion")
+def test_fusion_step(benchmark: Any) -> None:
+    rng = np.random.default_rng(3)
+    a = rng.multivariate_normal([0.0, 0.0], np.diag([0.04, 0.01]), 300)
+    b = rng.multivariate_normal([0.1, 0.0], np.diag([0.01, 0.04]), 300)
+    benchmark(fuse, a, b, 300, rng)
+
+
+@pytest.mark.benchmark(group="fusion")
+def test_yardstick_exp_180k(benchmark: Any) -> None:
+    x = np.random.default_rng(0).random(180_000)  # the kernel evaluations of one fusion step
+    benchmark(np.exp, x)
+
+
+@pytest.mark.benchmark(group="run")
+def test_whole_run_10_movements(benchmark: Any) -> None:
+    run = simulate_bearings(10, np.random.default_rng(4), eps_rad=EPS)
+
+    def go() -> None:
+        slam = BearingSlam(
+            ["L1", "L2", "L3", "L4"],
+            PAPER_REFERENCE,
+            vision_error_rad=EPS,
+            rng=np.random.default_rng(5),
+        )
+        for obs in run.observations:
+            slam.process_movement(obs)
+
+    benchmark(go)
