@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.frame_change import to_fl
+
 
 @dataclass(frozen=True)
 class WorldToFL:
@@ -34,10 +36,7 @@ class WorldToFL:
 
     def apply(self, points_world: NDArray[np.floating]) -> NDArray[np.float64]:
         """Map points (..., 2) in metres, world frame, to FL (..., 2)."""
-        p = np.asarray(points_world, np.float64)
-        z = (p[..., 0] + 1j * p[..., 1]) - complex(*self.l1_world)
-        z = z / complex(*(self.l2_world - self.l1_world))
-        return np.stack([z.real, z.imag], axis=-1)
+        return to_fl(np.asarray(points_world, np.float64), self.l1_world, self.l2_world)
 
 
 @dataclass(frozen=True)
