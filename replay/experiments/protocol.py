@@ -76,8 +76,8 @@ class Protocol:
             raise ProtocolError(f"unknown frame change {self.frame_change!r}; use one of {choices}")
 
     def to_dict(self) -> dict[str, Any]:
-        """The protocol as JSON-ready data."""
-        return asdict(self)
+        """The protocol as JSON-ready data (tuples become lists)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
 
 def _set_bearing_noise(scenario: dict[str, Any], value: float) -> None:
