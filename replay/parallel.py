@@ -18,8 +18,14 @@ from typing import Any, Generic, TypeVar
 
 from tqdm import tqdm
 
+from data_schemas.errors import BslamError
+
 A = TypeVar("A")
 T = TypeVar("T")
+
+
+class SchedulerError(BslamError):
+    """The Dask scheduler cannot be reached."""
 
 
 @dataclass(frozen=True)
@@ -127,7 +133,11 @@ def _run_dask(
     from distributed import as_completed as dask_as_completed
 
     outcomes: list[Outcome[T]] = []
-    with Client(scheduler) as client:  # type: ignore[no-untyped-call]
+    try:
+        client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise SchedulerError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+    with client:
         futures = client.map(guarded, list(range(len(tasks))), list(tasks), pure=False)
         index = {fut.key: i for i, fut in enumerate(futures)}
         with _bar(len(tasks), desc, progress) as bar:

@@ -94,7 +94,7 @@ class Results:
 
 
 def _json_float(x: float) -> float | None:
-    return None if math.isnan(x) else x
+    return x if math.isfinite(x) else None
 
 
 def write_results(results: Results, out_dir: Path) -> Path:
