@@ -1,0 +1,46 @@
+"""Pure computation: bearings in, particle sets and estimates out (no I/O)."""
+
+from pipeline.batch_ls import batch_least_squares
+from pipeline.cones import ConeIntersection, Degenerate, intersect_cones, vision_cone_polygon
+from pipeline.crb import cramer_rao_bound, fisher_information, truncated_gaussian_std
+from pipeline.estimate import LandmarkEstimate
+from pipeline.frame_change import change_frame
+from pipeline.fusion import fuse
+from pipeline.init_fr import initialize_fr
+from pipeline.priors import (
+    R_MAX_FR,
+    R_MIN_FR,
+    GaussianPrior,
+    ImpartialPrior,
+    MixturePrior,
+    make_prior,
+    prior_density_grid,
+    range_marginal,
+)
+from pipeline.slam import BearingSlam, MovementObservation, MovementResult
+
+__all__ = [
+    "R_MAX_FR",
+    "R_MIN_FR",
+    "BearingSlam",
+    "ConeIntersection",
+    "Degenerate",
+    "GaussianPrior",
+    "ImpartialPrior",
+    "LandmarkEstimate",
+    "MixturePrior",
+    "MovementObservation",
+    "MovementResult",
+    "batch_least_squares",
+    "change_frame",
+    "cramer_rao_bound",
+    "fisher_information",
+    "fuse",
+    "initialize_fr",
+    "intersect_cones",
+    "make_prior",
+    "prior_density_grid",
+    "range_marginal",
+    "truncated_gaussian_std",
+    "vision_cone_polygon",
+]

@@ -1,0 +1,108 @@
+"""Batch least squares: 2-D bundle adjustment over all bearings (METHOD.md section 8).
+
+Unknowns: every non-reference landmark's position in FL, and per movement its start point
+``O1`` (FL), heading and log-length (so ``O2 = O1 + e^l (cos h, sin h)``). Gauge: the reference
+pair is fixed at L1 = (0, 0), L2 = (1, 0). Residuals: wrapped bearing errors
+``wrap(measured - (atan2(L - O) - h))`` at O1 and O2. Solved with
+``scipy.optimize.least_squares`` (trust-region reflective, 2-point Jacobian).
+
+Initial guess, per movement: triangulate every landmark in FR from its two bearings, send the
+reference pair to FL with the same similarity as :mod:`pipeline.frame_change`; landmarks start at
+the median of their FL triangulations. Movements whose reference pair cannot be triangulated
+(rays nearly parallel or not meeting in front) are left out.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from data_schemas.angles import wrap_rad
+from data_schemas.errors import EstimationError
+from pipeline.frame_change import to_fl
+from pipeline.slam import MovementObservation
+
+#: Minimal parallax (rad) for a triangulation to seed the solver.
+MIN_PARALLAX_RAD = math.radians(1.0)
+
+
+def triangulate_fr(b1_rad: float, b2_rad: float) -> NDArray[np.float64] | None:
+    """Intersection (2,) FR of the rays from (0,0) and (1,0), or None if they do not meet ahead."""
+    s = math.sin(b2_rad - b1_rad)
+    if abs(s) < math.sin(MIN_PARALLAX_RAD):
+        return None
+    r1 = math.sin(b2_rad) / s
+    r2 = math.sin(b1_rad) / s
+    if r1 <= 0.0 or r2 <= 0.0:
+        return None
+    return np.array([r1 * math.cos(b1_rad), r1 * math.sin(b1_rad)])
+
+
+def batch_least_squares(
+    observations: Sequence[MovementObservation],
+    landmarks: Sequence[str],
+    reference: tuple[str, str],
+) -> dict[str, NDArray[np.float64]]:
+    """Least-squares positions (2,) FL of the non-reference landmarks seen in usable movements."""
+    l1, l2 = reference
+    moves: list[tuple[MovementObservation, NDArray[np.float64], NDArray[np.float64]]] = []
+    seeds: dict[str, list[NDArray[np.float64]]] = {}
+    for obs in observations:
+        b1, b2 = obs.bearings_o1_rad, obs.bearings_o2_rad
+        if not all(r in b1 and r in b2 for r in reference):
+            continue
+        s1 = triangulate_fr(b1[l1], b2[l1])
+        s2 = triangulate_fr(b1[l2], b2[l2])
+        if s1 is None or s2 is None:
+            continue
+        o_fl = to_fl(np.array([[0.0, 0.0], [1.0, 0.0]]), s1, s2)
+        moves.append((obs, o_fl[0], o_fl[1]))
+        for name in landmarks:
+            if name in reference or name not in b1 or name not in b2:
+                continue
+            p = triangulate_fr(b1[name], b2[name])
+            if p is not None:
+                seeds.setdefault(name, []).append(to_fl(p, s1, s2))
+    free = [n for n in landmarks if n not in reference and n in seeds]
+    if not moves:
+        raise EstimationError("no movement sees the reference pair with enough parallax")
+    col = {n: i for i, n in enumerate(free)}
+    fixed = {l1: np.array([0.0, 0.0]), l2: np.array([1.0, 0.0])}
+    # observation table: movement k, landmark slot (-1/-2 fixed refs), end (0 = O1, 1 = O2)
+    mk, slot, end, meas = [], [], [], []
+    for k, (obs, _, _) in enumerate(moves):
+        for e, bmap in enumerate((obs.bearings_o1_rad, obs.bearings_o2_rad)):
+            for name, b in bmap.items():
+                if name in col or name in fixed:
+                    mk.append(k)
+                    slot.append(col.get(name, -1 if name == l1 else -2))
+                    end.append(e)
+                    meas.append(b)
+    mk_a = np.array(mk)
+    slot_a = np.array(slot)
+    end_a = np.array(end, dtype=np.float64)
+    meas_a = np.array(meas)
+    nf = len(free)
+
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        lm = np.vstack((x[: 2 * nf].reshape(nf, 2), fixed[l2], fixed[l1]))  # -2 -> l2, -1 -> l1
+        mv = x[2 * nf :].reshape(-1, 4)
+        h = mv[mk_a, 2]
+        length = np.exp(mv[mk_a, 3]) * end_a
+        ox = mv[mk_a, 0] + length * np.cos(h)
+        oy = mv[mk_a, 1] + length * np.sin(h)
+        p = lm[slot_a]
+        pred = np.arctan2(p[:, 1] - oy, p[:, 0] - ox) - h
+        out: NDArray[np.float64] = wrap_rad(meas_a - pred)
+        return out
+
+    x0 = [np.median(np.array(seeds[n]), axis=0) for n in free]
+    for _, o1, o2 in moves:
+        d = o2 - o1
+        x0.append(np.array([o1[0], o1[1], math.atan2(d[1], d[0]), math.log(math.hypot(*d))]))
+    sol = least_squares(residuals, np.concatenate(x0) if x0 else np.zeros(0), method="trf")
+    return {n: sol.x[2 * i : 2 * i + 2].copy() for i, n in enumerate(free)}

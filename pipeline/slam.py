@@ -1,0 +1,221 @@
+"""The public estimator: bearings of one straight movement in, particle sets and estimates out.
+
+Example
+-------
+>>> import numpy as np
+>>> from pipeline import BearingSlam, MovementObservation
+>>> slam = BearingSlam(["L1", "L2", "L3"], ("L1", "L2"), vision_error_rad=np.radians(3),
+...                    rng=np.random.default_rng(0))
+>>> res = slam.process_movement(MovementObservation(0, {"L1": 1.2, "L2": 0.9, "L3": 2.5},
+...                                                 {"L1": 1.5, "L2": 1.3, "L3": 2.7}))
+>>> res.status, sorted(res.estimates)
+('ok', ['L3'])
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.errors import EstimationError
+from pipeline.cones import O1_FR, O2_FR, Degenerate, intersect_cones, vision_cone_polygon
+from pipeline.estimate import LandmarkEstimate
+from pipeline.frame_change import FrameChange, change_frame
+from pipeline.fusion import fuse
+from pipeline.init_fr import initialize_fr
+from pipeline.priors import R_MAX_FR, R_MIN_FR, PriorName, make_prior
+
+
+@dataclass(frozen=True)
+class MovementObservation:
+    """Bearings of one straight movement (robot frame, rad, CCW, 0 = forward).
+
+    A landmark missing from either mapping is not used for this movement.
+    """
+
+    index: int
+    bearings_o1_rad: Mapping[str, float]
+    bearings_o2_rad: Mapping[str, float]
+
+
+def _empty() -> NDArray[np.float64]:
+    return np.zeros((0, 2))
+
+
+@dataclass
+class MovementResult:
+    """Everything one movement produced (for display, logging and tests).
+
+    Attributes
+    ----------
+    index : int
+        The movement's index.
+    status : str
+        ``"ok"`` or ``"skipped: <reason>"`` (state unchanged).
+    skipped_landmarks : dict of name -> reason
+    cones_fr : dict of name -> (cone at O1, cone at O2), polygons (k, 2) FR
+    particles_fr : dict of name -> (n_r, 2) FR, reference pair included
+    particles_fl : dict of name -> (n_l, 2) FL, this movement's ``p_t`` (non-reference)
+    o1_fl, o2_fl : ndarray (m, 2)
+        Particles of the observation points in FL.
+    belief_fl : dict of name -> (n_l, 2) FL
+        Fused belief after this movement (all landmarks known so far).
+    estimates : dict of name -> LandmarkEstimate
+    """
+
+    index: int
+    status: str
+    skipped_landmarks: dict[str, str] = field(default_factory=dict)
+    cones_fr: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
+        default_factory=dict
+    )
+    particles_fr: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    particles_fl: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    o1_fl: NDArray[np.float64] = field(default_factory=_empty)
+    o2_fl: NDArray[np.float64] = field(default_factory=_empty)
+    belief_fl: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    estimates: dict[str, LandmarkEstimate] = field(default_factory=dict)
+
+
+class BearingSlam:
+    """Sequential bearing-only SLAM with the impartial PDF (or a baseline prior).
+
+    Parameters
+    ----------
+    landmarks : sequence of str
+        Landmark names (the catalog).
+    reference : (str, str)
+        Reference pair: L1 -> (0, 0), L2 -> (1, 0) in FL.
+    vision_error_rad : float
+        Bound eps on the bearing error.
+    prior : {"impartial", "gaussian", "mixture"}
+        Single-bearing prior used to weight the cone intersection.
+    n_r : int
+        Particles per landmark in FR (paper: 50).
+    n_l : int
+        Particles per landmark in FL (paper: 300).
+    frame_change : {"sampled", "exact"}
+        O(n_l) random triples (default: as accurate, far faster) or the paper's enumeration.
+    rng : numpy.random.Generator
+    r_min, r_max : float
+        Range bounds of the vision cones in FR units (movement length = 1).
+    """
+
+    def __init__(
+        self,
+        landmarks: Sequence[str],
+        reference: tuple[str, str],
+        *,
+        vision_error_rad: float,
+        prior: PriorName = "impartial",
+        n_r: int = 50,
+        n_l: int = 300,
+        frame_change: FrameChange = "sampled",
+        rng: np.random.Generator,
+        r_min: float = R_MIN_FR,
+        r_max: float = R_MAX_FR,
+    ) -> None:
+        names = list(landmarks)
+        if len(set(names)) != len(names):
+            raise EstimationError(f"landmark names must be unique, got {names}")
+        if reference[0] == reference[1] or any(r not in names for r in reference):
+            raise EstimationError(
+                f"reference must be two different catalog landmarks, got {reference}"
+            )
+        if n_r < 2 or n_l < 2:
+            raise EstimationError(f"need n_r >= 2 and n_l >= 2, got n_r={n_r}, n_l={n_l}")
+        if frame_change not in ("sampled", "exact"):
+            raise EstimationError(
+                f"frame_change must be 'sampled' or 'exact', got {frame_change!r}"
+            )
+        self.landmarks = names
+        self.reference = reference
+        self.eps_rad = float(vision_error_rad)
+        self.prior = make_prior(prior, self.eps_rad, r_min, r_max)
+        self.n_r = n_r
+        self.n_l = n_l
+        self.frame_change: FrameChange = frame_change
+        self.rng = rng
+        self._belief: dict[str, NDArray[np.float64]] = {}
+        self._trajectory: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+        self.used_movements: list[int] = []
+
+    def _initialize(
+        self, obs: MovementObservation, res: MovementResult
+    ) -> dict[str, NDArray[np.float64]]:
+        pr = self.prior
+        out: dict[str, NDArray[np.float64]] = {}
+        for name in sorted(set(obs.bearings_o1_rad) | set(obs.bearings_o2_rad)):
+            if name not in self.landmarks:
+                res.skipped_landmarks[name] = "not in the landmark catalog"
+        for name in self.landmarks:
+            b1 = obs.bearings_o1_rad.get(name)
+            b2 = obs.bearings_o2_rad.get(name)
+            if b1 is None or b2 is None:
+                where = "O1 and O2" if b1 is None and b2 is None else ("O1" if b1 is None else "O2")
+                res.skipped_landmarks[name] = f"not seen at {where}"
+                continue
+            b1, b2 = float(b1), float(b2)
+            if math.isfinite(b1) and math.isfinite(b2):
+                res.cones_fr[name] = (
+                    vision_cone_polygon(O1_FR, b1, self.eps_rad, pr.r_min, pr.r_max),
+                    vision_cone_polygon(O2_FR, b2, self.eps_rad, pr.r_min, pr.r_max),
+                )
+            region = intersect_cones(b1, b2, self.eps_rad, pr.r_min, pr.r_max)
+            if isinstance(region, Degenerate):
+                res.skipped_landmarks[name] = region.reason
+                continue
+            s = initialize_fr(region, pr, self.n_r, self.rng)
+            if isinstance(s, Degenerate):
+                res.skipped_landmarks[name] = s.reason
+                continue
+            out[name] = s
+        return out
+
+    def process_movement(self, obs: MovementObservation) -> MovementResult:
+        """Initialize every visible landmark in FR, move to FL and fuse into the belief.
+
+        A movement whose reference landmarks are missing or degenerate gets status
+        ``"skipped: <reason>"`` and leaves the state unchanged.
+        """
+        res = MovementResult(obs.index, "ok")
+        sets_fr = self._initialize(obs, res)
+        res.particles_fr = sets_fr
+        for ref in self.reference:
+            if ref not in sets_fr:
+                res.status = f"skipped: reference landmark {ref!r}: {res.skipped_landmarks[ref]}"
+                res.belief_fl = dict(self._belief)
+                res.estimates = self.estimates
+                return res
+        l1, l2 = self.reference
+        others = {k: v for k, v in sets_fr.items() if k not in self.reference}
+        fl = change_frame(sets_fr[l1], sets_fr[l2], others, self.n_l, self.rng, self.frame_change)
+        for name, p_t in fl.landmarks_fl.items():
+            prev = self._belief.get(name)
+            self._belief[name] = p_t if prev is None else fuse(prev, p_t, self.n_l, self.rng)
+        self._trajectory.append((fl.o1_fl, fl.o2_fl))
+        self.used_movements.append(obs.index)
+        res.particles_fl = fl.landmarks_fl
+        res.o1_fl, res.o2_fl = fl.o1_fl, fl.o2_fl
+        res.belief_fl = dict(self._belief)
+        res.estimates = self.estimates
+        return res
+
+    @property
+    def belief_fl(self) -> dict[str, NDArray[np.float64]]:
+        """Current belief per non-reference landmark: (n_l, 2) FL."""
+        return dict(self._belief)
+
+    @property
+    def estimates(self) -> dict[str, LandmarkEstimate]:
+        """Current estimate per non-reference landmark seen so far."""
+        return {k: LandmarkEstimate.from_particles(v) for k, v in self._belief.items()}
+
+    @property
+    def trajectory_fl(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Per used movement, the particles (m, 2) of O1 and O2 in FL."""
+        return list(self._trajectory)
