@@ -127,6 +127,8 @@ class MovementRecord:
         Keyframe bearings used (None where not visible), every catalog landmark.
     skipped_landmarks : dict name -> reason
         Landmarks this movement could not initialise (not visible, degenerate geometry).
+    cones_fr : dict name -> (cone at O1, cone at O2)
+        Vision cone polygons (k, 2) in FR.
     particles_fr : dict name -> (n_r, 2)
         Landmark particles in FR (O1 = (0, 0), O2 = (1, 0)).
     particles_fl : dict name -> (n_l, 2)
@@ -143,6 +145,9 @@ class MovementRecord:
     status: str
     bearings_rad: Mapping[str, tuple[float | None, float | None]]
     skipped_landmarks: Mapping[str, str] = field(default_factory=dict)
+    cones_fr: Mapping[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
+        default_factory=dict
+    )
     particles_fr: Mapping[str, NDArray[np.float64]] = field(default_factory=dict)
     particles_fl: Mapping[str, NDArray[np.float64]] = field(default_factory=dict)
     o1_fl: NDArray[np.float64] | None = None

@@ -40,6 +40,7 @@ from replay.records import FrameRecord, MovementRecord, RunInfo
 LOG_TIME = "log_time"
 MOVEMENT = "movement"
 Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
+FR_APEXES = ((0.0, 0.0), (1.0, 0.0))
 TRUTH_RGB = (240, 240, 240)
 TRAJECTORY_RGB = (255, 160, 0)
 
@@ -53,13 +54,18 @@ def landmark_rgb(session: Session) -> dict[str, tuple[int, int, int]]:
     return out
 
 
-def cone_outline(
-    apex: tuple[float, float], bearing_rad: float, eps_rad: float, length: float
+def shorten(
+    polygon: NDArray[np.float64], apex: tuple[float, float], reach: float
 ) -> NDArray[np.float64]:
-    """Closed outline (k, 2) of a vision cone of half-width ``eps_rad`` (FR, bearing = angle)."""
-    angles = np.linspace(bearing_rad - eps_rad, bearing_rad + eps_rad, 9)
-    arc = np.stack([np.cos(angles), np.sin(angles)], axis=1) * length + apex
-    return np.vstack([apex, arc, apex])
+    """A closed copy of ``polygon`` (k, 2) with vertices pulled within ``reach`` of ``apex``.
+
+    Vision cones run to R_max (far beyond the landmarks); for display they are cut at ``reach``.
+    """
+    d = polygon - apex
+    r = np.hypot(d[:, 0], d[:, 1])
+    scale = np.minimum(1.0, reach / np.maximum(r, 1e-12))
+    out = apex + d * scale[:, None]
+    return np.vstack([out, out[:1]])
 
 
 def detection_segments(
@@ -206,24 +212,26 @@ class RerunSink:
 
     def _log_fr(self, record: MovementRecord, session: Session) -> None:
         log = self.rec.log
-        eps = session.vision_error_rad
         for name in session.landmark_names():
             particles = record.particles_fr.get(name)
-            b1, b2 = record.bearings_rad.get(name, (None, None))
-            if particles is None or b1 is None or b2 is None:
+            cones = record.cones_fr.get(name)
+            if cones is None:
                 log(f"fr/cones/{name}", rr.Clear(recursive=False))
+            else:
+                reach = 1.5 if particles is None else 1.5 * float(np.abs(particles).max()) + 0.5
+                outlines = [
+                    shorten(c, apex, reach) for c, apex in zip(cones, FR_APEXES, strict=True)
+                ]
+                log(f"fr/cones/{name}", rr.LineStrips2D(outlines, colors=[self._rgb[name]]))
+            if particles is None:
                 log(f"fr/particles/{name}", rr.Clear(recursive=False))
-                continue
-            reach = max(1.5, 1.3 * float(np.max(np.hypot(*(particles - [0.5, 0.0]).T))))
-            cones = [
-                cone_outline((0.0, 0.0), b1, eps, reach),
-                cone_outline((1.0, 0.0), b2, eps, reach),
-            ]
-            log(f"fr/cones/{name}", rr.LineStrips2D(cones, colors=[self._rgb[name]]))
-            log(
-                f"fr/particles/{name}",
-                rr.Points2D(particles, colors=[self._rgb[name]], radii=rr.Radius.ui_points(2.0)),
-            )
+            else:
+                log(
+                    f"fr/particles/{name}",
+                    rr.Points2D(
+                        particles, colors=[self._rgb[name]], radii=rr.Radius.ui_points(2.0)
+                    ),
+                )
 
     def _log_fl(self, record: MovementRecord, run: RunInfo) -> None:
         log = self.rec.log

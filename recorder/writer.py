@@ -1,0 +1,361 @@
+"""Crash-safe MCAP writer for bearing-slam logs.
+
+:class:`LogWriter` writes the session metadata record first, then messages in chunks that it
+closes itself, so that every byte it has accepted reaches the operating system soon:
+
+* a chunk is closed when it holds ``chunk_bytes`` of messages, or when its oldest message is
+  ``chunk_seconds`` old (real time). A background thread closes old chunks even while the
+  recorder is blocked (waiting for the robot, say);
+* closing a chunk writes it and its message indexes to the file and flushes Python's buffer,
+  so a killed process (SIGKILL) loses at most the open chunk: under one second of data;
+* with ``fsync=True`` (the default for files) each closed chunk is also ``os.fsync``-ed, outside
+  the lock, so a power cut loses no more than a kill;
+* :meth:`LogWriter.finish` writes the summary and footer (an indexed file). An unfinished file
+  is still readable chunk by chunk (:mod:`recorder.logread`) and ``bslam recover`` indexes it.
+
+If the disk fills up (``ENOSPC``, ``EDQUOT``, or ``EFBIG`` from ``RLIMIT_FSIZE``) the writer
+cuts the file back to the end of the last complete chunk, stops, and raises
+:class:`~data_schemas.errors.DiskFullError`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import json
+import os
+import threading
+import time
+from importlib.metadata import PackageNotFoundError, version
+from types import TracebackType
+from typing import IO, Any, Literal
+
+from mcap.writer import CompressionType, Writer
+
+from data_schemas.codec import validate
+from data_schemas.errors import DiskFullError, LogError, SchemaError
+from data_schemas.registry import (
+    IMAGE_SCHEMAS,
+    MESSAGE_ENCODING,
+    SCHEMA_ENCODING,
+    SESSION_METADATA_NAME,
+    schema_json,
+    topic,
+)
+from data_schemas.session import session_from_doc
+from data_schemas.stamps import ns_from_stamp
+from recorder.clock import Clock
+
+#: errno values that mean "no room left for this file".
+_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT})
+
+Compression = Literal["zstd", "lz4", "none"]
+_COMPRESSION = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+
+
+def software_version() -> str:
+    """Installed version of the ``bearing-slam`` distribution (``0+unknown`` from a checkout)."""
+    try:
+        return version("bearing-slam")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+class LogWriter:
+    """Write a bearing-slam MCAP log: session metadata first, validated JSON messages after.
+
+    Parameters
+    ----------
+    output : str, os.PathLike or binary stream
+        Where to write. A path is opened (and closed) by the writer; a stream is left open.
+    session_doc : dict
+        The session document (``bslam.Session``); validated before anything is written.
+    clock : Clock
+        Time source; ``log_time`` of each message is ``clock.monotonic_ns()`` when written
+        (use :class:`recorder.timebase.EpochClock` so that it reads as a date).
+    chunk_bytes : int
+        Close a chunk once it holds this many bytes of records.
+    chunk_seconds : float
+        Close a chunk once its oldest message is this old (real seconds); at most 1.
+    compression : {"zstd", "lz4", "none"}
+        Chunk compression. Frames are PNG already; zstd mostly wins back base64's third.
+    fsync : bool
+        ``os.fsync`` after every closed chunk (ignored for streams without a file number).
+
+    Examples
+    --------
+    >>> with LogWriter("run.mcap", doc, clock=EpochClock(SystemClock())) as log:  # doctest: +SKIP
+    ...     log.write("/log", message)
+    """
+
+    def __init__(
+        self,
+        output: str | os.PathLike[str] | IO[bytes],
+        session_doc: dict[str, Any],
+        *,
+        clock: Clock,
+        chunk_bytes: int = 4 * 1024 * 1024,
+        chunk_seconds: float = 0.5,
+        compression: Compression = "zstd",
+        fsync: bool = True,
+    ) -> None:
+        if not 0 < chunk_seconds <= 1.0:
+            raise ValueError(f"chunk_seconds must be in (0, 1], got {chunk_seconds}")
+        session_from_doc(session_doc)
+        self._clock = clock
+        self._chunk_bytes = chunk_bytes
+        self._chunk_seconds = chunk_seconds
+        self._path: str | None = None
+        if isinstance(output, str | os.PathLike):
+            self._path = os.fspath(output)
+            try:
+                self._stream: IO[bytes] = open(self._path, "wb")  # noqa: SIM115 (closed in finish)
+            except OSError as exc:
+                raise LogError(f"cannot create log {self._path}: {exc.strerror}") from None
+            self.name = self._path
+        else:
+            self._stream = output
+            self.name = str(getattr(output, "name", "<stream>"))
+        self._fileno = _fileno(self._stream) if fsync else None
+        self._mcap = Writer(
+            self._stream,
+            chunk_size=2**62,  # chunks are closed by this class, never by size inside mcap
+            compression=_COMPRESSION[compression],
+        )
+        self._lock = threading.Lock()
+        self._channels: dict[str, tuple[int, str]] = {}
+        self._schema_ids: dict[str, int] = {}
+        self._sequence: dict[int, int] = {}
+        self._pending_bytes = 0
+        self._pending_since: float | None = None
+        self._messages = 0
+        self._committed_messages = 0
+        self._good_offset = 0
+        self._error: BaseException | None = None
+        self._error_raised = False
+        self._finished = False
+        self._stop = threading.Event()
+        with self._lock:
+            self._guard(self._start, session_doc)
+        self._flusher = threading.Thread(target=self._flush_loop, name="mcap-flush", daemon=True)
+        self._flusher.start()
+
+    # ------------------------------------------------------------------ public API
+    @property
+    def message_count(self) -> int:
+        """Messages accepted so far."""
+        return self._messages
+
+    @property
+    def committed_count(self) -> int:
+        """Messages in complete chunks already handed to the operating system."""
+        return self._committed_messages
+
+    def write(self, topic_name: str, msg: dict[str, Any], *, schema: str | None = None) -> int:
+        """Validate and write one message; return its ``log_time`` (ns).
+
+        Parameters
+        ----------
+        topic_name : str
+            A registered topic (``data_schemas.registry.TOPICS``).
+        msg : dict
+            The message; its ``timestamp`` (if any) becomes the MCAP ``publish_time``.
+        schema : str, optional
+            Schema name; default the topic's. An image topic may use any of
+            ``IMAGE_SCHEMAS`` (e.g. ``foxglove.RawImage``), but one schema per topic per log.
+
+        Raises
+        ------
+        SchemaError
+            The message does not match its schema, or the topic changed schema.
+        DiskFullError
+            No room left; the file keeps every complete chunk.
+        """
+        schema_name = self._schema_for(topic_name, schema)
+        validate(schema_name, msg, what=topic_name)
+        data = json.dumps(msg, separators=(",", ":")).encode()
+        stamp = msg.get("timestamp")
+        with self._lock:
+            self._check_usable()
+            channel_id = self._channel(topic_name, schema_name)
+            log_time = self._clock.monotonic_ns()
+            publish_time = ns_from_stamp(stamp) if stamp is not None else log_time
+            seq = self._sequence[channel_id] = self._sequence[channel_id] + 1
+            self._guard(self._mcap.add_message, channel_id, log_time, data, publish_time, seq)
+            self._messages += 1
+            self._pending_bytes += len(data)
+            now = time.monotonic()
+            if self._pending_since is None:
+                self._pending_since = now
+            if (
+                self._pending_bytes >= self._chunk_bytes
+                or now - self._pending_since >= self._chunk_seconds
+            ):
+                self._commit()
+        return log_time
+
+    def flush(self) -> None:
+        """Close the open chunk and hand everything to the operating system now."""
+        with self._lock:
+            self._check_usable()
+            self._commit()
+        self._sync()
+
+    def finish(self) -> None:
+        """Write summary and footer (an indexed file) and close; safe to call twice.
+
+        After a disk-full error this only closes the file (it stays unfinished, readable up to
+        the last complete chunk) and raises the error if it was not raised before.
+        """
+        if self._finished:
+            return
+        self._finished = True
+        self._stop.set()
+        self._flusher.join()
+        with self._lock:
+            if self._error is None:
+                self._guard(self._mcap.finish)
+            if self._error is None:
+                self._guard(self._stream.flush)
+        if self._error is None:
+            self._sync()
+            if self._path is not None:
+                self._stream.close()
+            return
+        if not self._error_raised:
+            self._error_raised = True
+            raise self._error
+
+    def __enter__(self) -> LogWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.finish()
+
+    # ------------------------------------------------------------------ internals
+    def _start(self, session_doc: dict[str, Any]) -> None:
+        self._mcap.start(profile="", library=f"bearing-slam/{software_version()}")
+        self._mcap.add_metadata(
+            SESSION_METADATA_NAME, {"json": json.dumps(session_doc, separators=(",", ":"))}
+        )
+        self._mcap.flush()  # type: ignore[no-untyped-call]
+        self._good_offset = self._stream.tell()
+
+    def _schema_for(self, topic_name: str, schema: str | None) -> str:
+        registered = topic(topic_name).schema
+        if schema is None or schema == registered:
+            return registered
+        if registered in IMAGE_SCHEMAS and schema in IMAGE_SCHEMAS:
+            return schema
+        raise SchemaError(f"{topic_name}: schema {schema!r} is not allowed (expected {registered})")
+
+    def _channel(self, topic_name: str, schema_name: str) -> int:
+        known = self._channels.get(topic_name)
+        if known is not None:
+            if known[1] != schema_name:
+                raise SchemaError(
+                    f"{topic_name}: this log already writes it as {known[1]}, not {schema_name}"
+                )
+            return known[0]
+        schema_id = self._schema_ids.get(schema_name)
+        if schema_id is None:
+            schema_id = self._mcap.register_schema(
+                schema_name, SCHEMA_ENCODING, schema_json(schema_name)
+            )
+            self._schema_ids[schema_name] = schema_id
+        channel_id = self._mcap.register_channel(topic_name, MESSAGE_ENCODING, schema_id)
+        self._channels[topic_name] = (channel_id, schema_name)
+        self._sequence[channel_id] = 0
+        return channel_id
+
+    def _commit(self) -> None:
+        """Close the open chunk and flush (caller holds the lock)."""
+        if self._pending_since is None:
+            return
+        self._guard(self._mcap.flush)
+        self._good_offset = self._stream.tell()
+        self._committed_messages = self._messages
+        self._pending_bytes = 0
+        self._pending_since = None
+
+    def _sync(self) -> None:
+        if self._fileno is None or self._error is not None:
+            return
+        try:
+            os.fsync(self._fileno)
+        except OSError as exc:
+            with self._lock:
+                self._fail(exc)
+
+    def _flush_loop(self) -> None:
+        """Background thread: close chunks that got old while nobody wrote."""
+        period = self._chunk_seconds / 4
+        while not self._stop.wait(period):
+            try:
+                with self._lock:
+                    since = self._pending_since
+                    old = since is not None and time.monotonic() - since >= self._chunk_seconds
+                    if old and self._error is None:
+                        self._commit()
+                if old:
+                    self._sync()
+            except LogError:
+                self._error_raised = False  # nobody has seen it: the next write/finish raises
+                return
+
+    def _check_usable(self) -> None:
+        if self._error is not None:
+            self._error_raised = True
+            raise self._error from None
+        if self._finished:
+            raise LogError(f"log {self.name} is already finished")
+
+    def _guard(self, fn: Any, *args: Any) -> None:
+        """Run a write operation; turn OSError into a LogError (caller holds the lock)."""
+        try:
+            fn(*args)
+        except OSError as exc:
+            self._fail(exc)
+
+    def _fail(self, exc: OSError) -> None:
+        """Stop writing after an OS error, keep the complete chunks, raise a clear error."""
+        if exc.errno in _FULL_ERRNOS:
+            error: LogError = DiskFullError(
+                f"disk full while writing {self.name} ({exc.strerror}): "
+                f"{self._committed_messages} messages kept up to the last complete chunk; "
+                f"free space, then run `bslam recover {self.name} FIXED.mcap`"
+            )
+        else:
+            error = LogError(f"cannot write log {self.name}: {exc.strerror or exc}")
+        self._error = error
+        self._error_raised = True
+        self._stop.set()
+        self._abandon()
+        raise error from None
+
+    def _abandon(self) -> None:
+        """Close the file we own and cut it back to the last complete chunk."""
+        if self._path is None:
+            return
+        # the unwritten buffer is lost by design (cut off below); if truncating fails, the
+        # reader skips the partial chunk at the end anyway
+        with contextlib.suppress(OSError):
+            self._stream.close()
+        with contextlib.suppress(OSError):
+            os.truncate(self._path, self._good_offset)
+
+
+def _fileno(stream: IO[bytes]) -> int | None:
+    try:
+        return stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return None

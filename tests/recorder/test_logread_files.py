@@ -1,0 +1,151 @@
+"""LogReader, log_summary and recover_log on finished, truncated, corrupt and foreign files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import make_session_doc, sample_messages
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from data_schemas.errors import LogError, MissingMetadataError, NotMcapError, UnfinishedLogError
+from data_schemas.registry import SESSION_METADATA_NAME
+from recorder.clock import VirtualClock
+from recorder.logread import LogReader, log_summary, recover_log
+from recorder.timebase import EpochClock
+from recorder.writer import LogWriter
+
+
+def _finished_log(path: Path, frames: int = 30) -> None:
+    clock = EpochClock(VirtualClock())
+    with LogWriter(path, make_session_doc(), clock=clock, chunk_bytes=3000) as log:
+        for i in range(frames):
+            msgs = sample_messages(clock.monotonic_ns(), np.random.default_rng(i))
+            log.write("/camera/panorama", msgs["/camera/panorama"])
+            clock.sleep(0.01)
+            log.write("/robot/odometry", msgs["/robot/odometry"])
+            clock.sleep(0.01)
+
+
+def _complete_before(path: Path, cut: int) -> int:
+    """Messages of the original file that lie in chunks ending before byte ``cut``."""
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        ends = [
+            c.message_end_time
+            for c in summary.chunk_indexes
+            if c.chunk_start_offset + c.chunk_length <= cut
+        ]
+        if not ends:
+            return 0
+        return sum(1 for _, _, m in reader.iter_messages() if m.log_time <= max(ends))
+
+
+def test_summary_of_finished_log(tmp_path: Path) -> None:
+    path = tmp_path / "a.mcap"
+    _finished_log(path, frames=10)
+    s = log_summary(path)
+    assert s.finished and s.trailing_bytes == 0
+    assert [(c.topic, c.schema, c.count) for c in s.channels] == [
+        ("/camera/panorama", "foxglove.CompressedImage", 10),
+        ("/robot/odometry", "bslam.Odometry", 10),
+    ]
+    assert s.message_count == 20
+    assert s.duration_s == pytest.approx(19 * 0.01)
+    assert SESSION_METADATA_NAME in s.metadata
+
+
+@pytest.mark.parametrize("fraction", [0.35, 0.6, 0.93])
+def test_truncated_log_reads_every_complete_chunk(tmp_path: Path, fraction: float) -> None:
+    path = tmp_path / "a.mcap"
+    _finished_log(path)
+    data = path.read_bytes()
+    cut = int(len(data) * fraction)
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(data[:cut])
+    expected = _complete_before(path, cut)
+    assert expected > 0
+
+    readable = rf"unfinished .*: {expected} messages are readable; run `bslam recover"
+    with pytest.raises(UnfinishedLogError, match=readable):
+        LogReader(broken)
+    with LogReader(broken, allow_unfinished=True) as reader:
+        assert not reader.finished
+        assert reader.session().reference == ("L1", "L2")
+        assert sum(1 for _ in reader.messages()) == expected
+
+    fixed = tmp_path / "fixed.mcap"
+    report = recover_log(broken, fixed)
+    assert report.messages == expected and not report.was_finished
+    assert report.dropped_bytes > 0
+    with LogReader(fixed) as reader:  # finished now: no allow_unfinished needed
+        assert reader.finished
+        assert reader.metadata == log_summary(path).metadata
+        got = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
+    with LogReader(path) as reader:
+        original = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
+    assert got == original[:expected]
+    with fixed.open("rb") as f:  # and the index is valid for mcap's own reader
+        assert sum(1 for _ in make_reader(f).iter_messages()) == expected
+
+
+def test_corrupt_chunk_stops_the_read(tmp_path: Path) -> None:
+    path = tmp_path / "a.mcap"
+    _finished_log(path)
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    third = summary.chunk_indexes[2]
+    data = bytearray(path.read_bytes())
+    flip = third.chunk_start_offset + third.chunk_length - 10
+    data[flip] ^= 0xFF
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(bytes(data[: third.chunk_start_offset + third.chunk_length + 5]))
+    with LogReader(broken, allow_unfinished=True) as reader:
+        n = sum(1 for _ in reader.messages())
+        assert reader.chunk_count == 2
+    second = summary.chunk_indexes[1]
+    assert n == _complete_before(path, second.chunk_start_offset + second.chunk_length)
+
+
+def test_not_mcap(tmp_path: Path) -> None:
+    path = tmp_path / "a.mcap"
+    path.write_text("hello, I am a text file\n")
+    with pytest.raises(NotMcapError, match=r"a.mcap is not an MCAP file"):
+        log_summary(path)
+    with pytest.raises(LogError, match="cannot open log"):
+        log_summary(tmp_path / "missing.mcap")
+
+
+def test_missing_session_metadata(tmp_path: Path) -> None:
+    path = tmp_path / "plain.mcap"
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        w.finish()
+    missing = r"no 'bslam\.session'"
+    with LogReader(path) as reader, pytest.raises(MissingMetadataError, match=missing):
+        reader.session()
+
+
+def test_empty_unfinished_log_has_only_metadata(tmp_path: Path) -> None:
+    path = tmp_path / "a.mcap"
+    log = LogWriter(path, make_session_doc(), clock=VirtualClock())
+    try:
+        # the session record reaches the file before any message is written
+        s = log_summary(path)
+        assert not s.finished and s.message_count == 0
+        assert SESSION_METADATA_NAME in s.metadata
+    finally:
+        log.finish()
+
+
+def test_recover_refuses_to_overwrite_its_input(tmp_path: Path) -> None:
+    path = tmp_path / "a.mcap"
+    _finished_log(path, frames=2)
+    with pytest.raises(LogError, match="other than"):
+        recover_log(path, path)
