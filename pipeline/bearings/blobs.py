@@ -1,0 +1,205 @@
+"""Blobs of one colour class: from an angular profile (bin sums) or from connected components.
+
+A blob's bearing is the circular mean of its pixels' bearings, ``atan2(sum sin, sum cos)``, so
+a blob that straddles the +-pi seam (or column 0 / W-1) averages correctly. Its width is the
+angular extent of the bins it occupies.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.angles import wrap_rad
+from pipeline.bearings.layout import Layout, OmniLayout, UnwrappedLayout
+
+
+@dataclass(frozen=True)
+class Blob:
+    """One blob: pixel count, circular-mean bearing (rad, [-pi, pi)), angular width (rad)."""
+
+    n_pixels: int
+    bearing_rad: float
+    width_rad: float
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Angular profile of a mask: per bin (n_bins,) pixel count and sums of cos/sin bearing."""
+
+    counts: NDArray[np.int64]
+    cos_sum: NDArray[np.float64]
+    sin_sum: NDArray[np.float64]
+    bin_width_rad: float
+
+
+def profile_of_mask(mask: NDArray[np.uint8], value: int, layout: Layout) -> Profile:
+    """Angular profile of ``mask`` (crop-sized for omni; pixels are 0 or ``value``).
+
+    Unwrapped: column sums. Omni: the nonzero pixels' sectors from the precomputed table.
+    """
+    if isinstance(layout, UnwrappedLayout):
+        sums = cv2.reduce(mask, 0, cv2.REDUCE_SUM, dtype=cv2.CV_32S)
+        counts = sums[0].astype(np.int64) // value
+        cos_sum, sin_sum = counts * layout.bin_cos, counts * layout.bin_sin
+        return Profile(counts, cos_sum, sin_sum, layout.bin_width_rad)
+    points = cv2.findNonZero(mask)
+    if points is None:
+        zeros = np.zeros(layout.n_bins)
+        return Profile(np.zeros(layout.n_bins, np.int64), zeros, zeros, layout.bin_width_rad)
+    xy = np.asarray(points, np.intp).reshape(-1, 2)
+    return _omni_profile(layout, xy[:, 1], xy[:, 0])
+
+
+def _omni_profile(layout: OmniLayout, ys: NDArray[np.intp], xs: NDArray[np.intp]) -> Profile:
+    """Angular profile of the ring pixels at rows ``ys``, columns ``xs`` (crop coordinates)."""
+    bins = layout.pixel_bin[ys, xs]
+    n = layout.n_bins
+    cos_sum = np.bincount(bins, weights=layout.pixel_cos[ys, xs], minlength=n)
+    sin_sum = np.bincount(bins, weights=layout.pixel_sin[ys, xs], minlength=n)
+    return Profile(
+        np.bincount(bins, minlength=n).astype(np.int64),
+        np.asarray(cos_sum, np.float64),
+        np.asarray(sin_sum, np.float64),
+        layout.bin_width_rad,
+    )
+
+
+def profile_blobs(
+    profile: Profile, *, min_pixels: int, max_gap_bins: int
+) -> tuple[list[Blob], int]:
+    """Split a profile into blobs: circular runs of occupied bins.
+
+    Parameters
+    ----------
+    profile : Profile
+        Angular profile of one class mask.
+    min_pixels : int
+        Runs with fewer pixels are not blobs (noise, or a landmark too small to trust).
+    max_gap_bins : int
+        Runs separated by at most this many empty bins are one blob (bridges noise dropouts).
+
+    Returns
+    -------
+    blobs : list of Blob
+        Runs with at least ``min_pixels`` pixels, largest first.
+    largest : int
+        Pixel count of the largest run (0 if the mask is empty).
+    """
+    occupied = np.flatnonzero(profile.counts)
+    m = occupied.size
+    if m == 0:
+        return [], 0
+    n_bins = profile.counts.size
+    step = np.diff(occupied, append=occupied[0] + n_bins)  # to the next occupied bin, circular
+    ends = np.flatnonzero(step > max_gap_bins + 1)  # index (in occupied) of each run's last bin
+    if ends.size == 0:  # no gap wide enough: one blob, its extent the complement of the widest gap
+        run_id = np.zeros(m, np.intp)
+        widths = np.array([n_bins - int(step.max()) + 1])
+    else:
+        starts = (ends + 1) % m  # index of each run's first bin; run r ends at ends[r]
+        is_start = np.zeros(m, np.intp)
+        is_start[starts] = 1
+        run_id = np.cumsum(is_start) - 1  # runs numbered by their start
+        run_id[run_id < 0] = ends.size - 1  # bins before the first start close the last run
+        widths = np.empty(ends.size, np.intp)
+        widths[run_id[starts]] = (occupied[ends] - occupied[starts]) % n_bins + 1
+    n_runs = widths.size
+    n_px = np.bincount(run_id, weights=profile.counts[occupied], minlength=n_runs)
+    largest = int(n_px.max())
+    keep = np.flatnonzero(n_px >= min_pixels)
+    if keep.size == 0:
+        return [], largest
+    cos_s = np.bincount(run_id, weights=profile.cos_sum[occupied], minlength=n_runs)
+    sin_s = np.bincount(run_id, weights=profile.sin_sum[occupied], minlength=n_runs)
+    blobs = [
+        Blob(
+            int(n_px[r]),
+            wrap_rad(math.atan2(float(sin_s[r]), float(cos_s[r]))),
+            int(widths[r]) * profile.bin_width_rad,
+        )
+        for r in keep[np.argsort(-n_px[keep], kind="stable")]
+    ]
+    return blobs, largest
+
+
+def component_blobs(
+    mask: NDArray[np.uint8], layout: Layout, *, min_pixels: int
+) -> tuple[list[Blob], int]:
+    """Blobs as 8-connected components of ``mask`` (the slower reference method).
+
+    Unwrapped panoramas join components that touch across the column 0 / W-1 seam.
+
+    Returns
+    -------
+    blobs : list of Blob
+        Components with at least ``min_pixels`` pixels, largest first.
+    largest : int
+        Pixel count of the largest component (0 if the mask is empty).
+    """
+    n_labels, labels_mat, stats_mat, _ = cv2.connectedComponentsWithStats(
+        mask, connectivity=8, ltype=cv2.CV_32S
+    )
+    labels, stats = np.asarray(labels_mat, np.int32), np.asarray(stats_mat, np.int32)
+    if n_labels == 1:
+        return [], 0
+    root = np.arange(n_labels)
+    if isinstance(layout, UnwrappedLayout):
+        _join_seam(labels, root)
+    area = np.bincount(root[1:], weights=stats[1:, cv2.CC_STAT_AREA], minlength=n_labels)
+    blobs = []
+    for r in np.argsort(-area, kind="stable"):
+        if area[r] < min_pixels:
+            break
+        profile = _component_profile(labels, stats, np.flatnonzero(root == r), layout)
+        blobs.append(profile_blobs(profile, min_pixels=0, max_gap_bins=layout.n_bins)[0][0])
+    return blobs, int(area.max())
+
+
+def _join_seam(labels: NDArray[np.int32], root: NDArray[np.intp]) -> None:
+    """Union (in ``root``) components touching across the left/right image edge (8-connected)."""
+    left, right = labels[:, 0], labels[:, -1]
+    h = labels.shape[0]
+    for shift in (-1, 0, 1):
+        a = left[max(0, -shift) : h - max(0, shift)]
+        b = right[max(0, shift) : h - max(0, -shift)]
+        both = (a > 0) & (b > 0)
+        for la, lb in set(zip(a[both].tolist(), b[both].tolist(), strict=True)):
+            ra, rb = _find(root, la), _find(root, lb)
+            root[max(ra, rb)] = min(ra, rb)
+    for label in range(root.size):
+        root[label] = _find(root, label)
+
+
+def _find(root: NDArray[np.intp], label: int) -> int:
+    while root[label] != label:
+        label = int(root[label])
+    return label
+
+
+def _component_profile(
+    labels: NDArray[np.int32], stats: NDArray[np.int32], members: NDArray[np.intp], layout: Layout
+) -> Profile:
+    """Angular profile of the union of components ``members`` (each cut out by its bbox)."""
+    counts = np.zeros(layout.n_bins, np.int64)
+    cos_sum = np.zeros(layout.n_bins)
+    sin_sum = np.zeros(layout.n_bins)
+    for k in members:
+        x, y, w, h = (int(v) for v in stats[k, :4])
+        sub = labels[y : y + h, x : x + w] == k
+        if isinstance(layout, UnwrappedLayout):
+            col = sub.sum(axis=0)
+            counts[x : x + w] += col
+            cos_sum[x : x + w] += col * layout.bin_cos[x : x + w]
+            sin_sum[x : x + w] += col * layout.bin_sin[x : x + w]
+        else:
+            ys, xs = np.nonzero(sub)
+            part = _omni_profile(layout, ys + y, xs + x)
+            counts += part.counts
+            cos_sum += part.cos_sum
+            sin_sum += part.sin_sum
+    return Profile(counts, cos_sum, sin_sum, layout.bin_width_rad)
