@@ -38,27 +38,69 @@ def _out_dir(out: Path) -> Path:
 
 def _common(fn: Any) -> Any:
     options = [
-        click.option("--out", type=click.Path(path_type=Path), required=True,
-                     help="Folder for logs, results, figures, .rrd and report."),
+        click.option(
+            "--out",
+            type=click.Path(path_type=Path),
+            required=True,
+            help="Folder for logs, results, figures, .rrd and report.",
+        ),
         click.option("--runs", type=int, default=None, help="Simulated trajectories."),
-        click.option("--movements", type=int, default=10, show_default=True,
-                     help="Straight movements per trajectory."),
-        click.option("--n-r", "n_r", type=int, default=50, show_default=True,
-                     help="Particles per landmark in FR."),
-        click.option("--n-l", "n_l", type=int, default=300, show_default=True,
-                     help="Particles per landmark in FL."),
-        click.option("--priors", default="impartial,gaussian,mixture", show_default=True,
-                     help="Single-view priors to compare."),
-        click.option("--frame-change", default="sampled", show_default=True,
-                     help="sampled (O(n_l) random triples) or exact (all n_r^3 triples)."),
-        click.option("--scenario", default="paper", show_default=True,
-                     help="Built-in scenario (paper, paper_omni) or a scenario JSON file."),
-        click.option("--workers", type=int, default=DEFAULT_WORKERS, show_default=True,
-                     help="Local worker processes."),
-        click.option("--scheduler", default=None,
-                     help="Dask scheduler address (tcp://host:8786) instead of local workers."),
-        click.option("--seed", type=int, default=0, show_default=True,
-                     help="Run i uses seed SEED + i."),
+        click.option(
+            "--movements",
+            type=int,
+            default=10,
+            show_default=True,
+            help="Straight movements per trajectory.",
+        ),
+        click.option(
+            "--n-r",
+            "n_r",
+            type=int,
+            default=50,
+            show_default=True,
+            help="Particles per landmark in FR.",
+        ),
+        click.option(
+            "--n-l",
+            "n_l",
+            type=int,
+            default=300,
+            show_default=True,
+            help="Particles per landmark in FL.",
+        ),
+        click.option(
+            "--priors",
+            default="impartial,gaussian,mixture",
+            show_default=True,
+            help="Single-view priors to compare.",
+        ),
+        click.option(
+            "--frame-change",
+            default="sampled",
+            show_default=True,
+            help="sampled (O(n_l) random triples) or exact (all n_r^3 triples).",
+        ),
+        click.option(
+            "--scenario",
+            default="paper",
+            show_default=True,
+            help="Built-in scenario (paper, paper_omni) or a scenario JSON file.",
+        ),
+        click.option(
+            "--workers",
+            type=int,
+            default=DEFAULT_WORKERS,
+            show_default=True,
+            help="Local worker processes.",
+        ),
+        click.option(
+            "--scheduler",
+            default=None,
+            help="Dask scheduler address (tcp://host:8786) instead of local workers.",
+        ),
+        click.option(
+            "--seed", type=int, default=0, show_default=True, help="Run i uses seed SEED + i."
+        ),
         click.option("--quiet", is_flag=True, help="No progress bar."),
     ]
     for option in reversed(options):
@@ -90,19 +132,31 @@ def experiment() -> None:
 
 @experiment.command("paper")
 @_common
-@click.option("--n-l-values", default="50,100,200,300,500,1000", show_default=True,
-              help="Particle counts of the Fig. 8 sweep (empty: skip it).")
+@click.option(
+    "--n-l-values",
+    default="50,100,200,300,500,1000",
+    show_default=True,
+    help="Particle counts of the Fig. 8 sweep (empty: skip it).",
+)
 def paper(**kw: Any) -> None:
     """The paper's protocol: 40 runs of 10 movements, Fig. 1/7/8, methods, report."""
     from replay.experiments.experiment import paper_experiment
     from replay.experiments.report import n_l_flatness, table_markdown
 
     out = _out_dir(kw["out"])
-    proto = _protocol(kw, 40 if kw["runs"] is None else kw["runs"],
-                      n_l_values=_int_list(kw["n_l_values"], "--n-l-values"))
+    proto = _protocol(
+        kw,
+        40 if kw["runs"] is None else kw["runs"],
+        n_l_values=_int_list(kw["n_l_values"], "--n-l-values"),
+    )
     results = paper_experiment(
-        out, proto, scenario=kw["scenario"], workers=kw["workers"],
-        scheduler=kw["scheduler"], progress=not kw["quiet"], command=_command(),
+        out,
+        proto,
+        scenario=kw["scenario"],
+        workers=kw["workers"],
+        scheduler=kw["scheduler"],
+        progress=not kw["quiet"],
+        command=_command(),
     )
     _, spread = n_l_flatness(results)
     click.echo(table_markdown(results))
@@ -113,9 +167,12 @@ def paper(**kw: Any) -> None:
 
 @experiment.command("sweep")
 @_common
-@click.option("--param", required=True,
-              help="bearing_noise_deg, vision_error_deg, movement_length_m, camera_model, "
-              "frame_change or n_l.")
+@click.option(
+    "--param",
+    required=True,
+    help="bearing_noise_deg, vision_error_deg, movement_length_m, camera_model, "
+    "frame_change or n_l.",
+)
 @click.option("--values", required=True, help="Comma-separated values, e.g. 0.5,1,2.")
 def sweep(**kw: Any) -> None:
     """Vary one parameter: one group of runs per value, a figure, a table per value."""
@@ -127,8 +184,15 @@ def sweep(**kw: Any) -> None:
         raise ExperimentArgumentError("--values: give at least one value, e.g. 0.5,1,2")
     proto = _protocol(kw, 10 if kw["runs"] is None else kw["runs"])
     results = sweep_experiment(
-        out, kw["param"], values, proto, scenario=kw["scenario"], workers=kw["workers"],
-        scheduler=kw["scheduler"], progress=not kw["quiet"], command=_command(),
+        out,
+        kw["param"],
+        values,
+        proto,
+        scenario=kw["scenario"],
+        workers=kw["workers"],
+        scheduler=kw["scheduler"],
+        progress=not kw["quiet"],
+        command=_command(),
     )
     _finish(results, out)
 

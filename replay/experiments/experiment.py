@@ -26,7 +26,7 @@ from replay.experiments.protocol import (
     apply_protocol_param,
     apply_scenario_param,
 )
-from replay.experiments.report import write_report
+from replay.experiments.report import write_report, write_sweep_report
 from replay.experiments.results import CRB, Results, RunRecord, write_results
 from replay.experiments.rrd import write_rrd
 from replay.experiments.run import RunOutput, RunTask, run_one
@@ -57,8 +57,9 @@ def plan_runs(
     tasks = []
     for i in range(protocol.runs):
         seed = protocol.seed + i
-        doc = dict(scenario, trajectory={**scenario["trajectory"], "seed": seed})
-        doc["trajectory"]["moves"] = protocol.movements
+        moves = scenario["trajectory"]["moves"]
+        moves = protocol.movements if isinstance(moves, int) else moves[: protocol.movements]
+        doc = dict(scenario, trajectory={**scenario["trajectory"], "seed": seed, "moves": moves})
         tasks.append(RunTask(group, i, seed, doc, str(folder / f"run_{i:03d}.mcap"), protocol))
     return tasks
 
@@ -152,7 +153,7 @@ def fig1(results: Results, path: Path) -> Path:
     xs = np.linspace(-0.2, r_max, 240)
     ys = np.linspace(-0.6, 0.6, 120)
     densities = {
-        p: prior_density_grid(p, 0.0, eps_rad, R_MIN_FR, r_max, xs, ys)  # type: ignore[arg-type]
+        p: prior_density_grid(p, 0.0, eps_rad, R_MIN_FR, r_max, xs, ys)
         for p in ("impartial", "gaussian", "mixture")
     }
     return plots.fig1_priors(xs, ys, densities, path)
@@ -185,7 +186,9 @@ def sweep_experiment(
         else:
             known = ", ".join([*SWEEP_PARAMS, *PROTOCOL_PARAMS])
             raise ProtocolError(f"unknown sweep parameter {param!r}; use one of {known}")
-        tasks += plan_runs(replace(proto, n_l_values=()), doc or scenario_doc(scenario), out_dir, group)
+        tasks += plan_runs(
+            replace(proto, n_l_values=()), doc or scenario_doc(scenario), out_dir, group
+        )
     records, rows, stages = run_all(
         tasks, workers=workers, scheduler=scheduler, progress=progress, desc=f"sweep {param}"
     )

@@ -138,7 +138,5 @@ def crb_rows(
         for name in ctx.scored:
             bound = cramer_rao_bound(landmarks_world[name], observers, sigma_rad)
             cm = 100.0 * math.sqrt(float(np.trace(bound)))
-            rows.append(
-                ErrorRow(ctx.group, ctx.run, CRB, 0, k, name, cm / ctx.scale_cm, cm, None)
-            )
+            rows.append(ErrorRow(ctx.group, ctx.run, CRB, 0, k, name, cm / ctx.scale_cm, cm, None))
     return rows

@@ -207,3 +207,33 @@ def write_report(results: Results, out_dir: Path, figures: dict[str, str]) -> Pa
     path = out_dir / "report.md"
     path.write_text("\n".join(lines), encoding="utf-8")
     return path
+
+
+def write_sweep_report(results: Results, out_dir: Path, figure: str) -> Path:
+    """Write ``report.md`` for a sweep: the figure and one comparison table per value."""
+    cfg = results.config
+    ok = len(results.runs) - len(results.failed())
+    elapsed_s = float(results.info.get("elapsed_s", math.nan))
+    lines = [
+        f"# {results.experiment}",
+        "",
+        f"Command: `{results.info.get('command', '')}`",
+        "",
+        f"{ok} of {len(results.runs)} runs succeeded in {elapsed_s:.1f} s. Base geometry: "
+        f"{_geometry(cfg)}. Errors in cm (FL times the true |L1 L2|); bands are 10th-90th "
+        "percentiles over runs.",
+        "",
+        f"![sweep]({figure})",
+        "",
+    ]
+    for value in cfg["values"]:
+        group = f"{cfg['param']}={value}"
+        lines += [f"## {group}", "", table_markdown(results, group=group), ""]
+    failed = results.failed()
+    if failed:
+        lines += ["## Failed runs", ""]
+        lines += [f"- {r.group} run {r.run} (seed {r.seed}): {r.status}" for r in failed]
+        lines.append("")
+    path = out_dir / "report.md"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    return path

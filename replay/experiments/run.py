@@ -6,6 +6,7 @@ summary stay on disk (``run_000.mcap``, ``run_000.summary.json``) for ``bslam re
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -51,8 +52,9 @@ class RunOutput:
 def run_one(task: RunTask) -> RunOutput:
     """Simulate, process and score one run (every method of ``task.protocol``)."""
     from recorder.record import simulate_log
-    from replay.process import process_log
     from replay.records import MethodConfig
+    from replay.sinks.summary import SummarySink
+    from replay.stages import run_log
 
     proto = task.protocol
     out = RunOutput()
@@ -63,7 +65,10 @@ def run_one(task: RunTask) -> RunOutput:
 
     tick = time.perf_counter()
     method = MethodConfig(prior="impartial", n_r=proto.n_r, n_l=proto.n_l, seed=task.seed)
-    summary = process_log(log, method, summary=log.with_suffix(".summary.json"))
+    sink = SummarySink()
+    run_log(log, method, [sink])
+    summary = sink.document
+    log.with_suffix(".summary.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
     out.seconds["process"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
