@@ -146,11 +146,11 @@ def _run_dask(
     from distributed import as_completed as dask_as_completed
 
     try:
-        client = Client(scheduler, timeout="10s")
+        client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
     except (OSError, TimeoutError) as exc:
         raise SchedulerError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
     with client:
         futures = client.map(job_fn, list(jobs), pure=False)
-        for future in dask_as_completed(futures):
+        for future in dask_as_completed(futures):  # type: ignore[no-untyped-call]
             outcome: LogOutcome = future.result()
             yield outcome

@@ -131,6 +131,13 @@ class Runner:
         info = RunInfo(self.log.name, self.session, self.method, self.truth)
         for sink in self.sinks:
             sink.start(info)
+        try:
+            self._frames()
+        finally:
+            for sink in self.sinks:
+                sink.finish()
+
+    def _frames(self) -> None:
         keys_at = self.plan.keys_at()
         for msg in self.log.messages([CAMERA_TOPIC]):
             keys = keys_at.get(msg.publish_time_ns, [])
@@ -146,8 +153,6 @@ class Runner:
         for index in sorted(self.plan.keyframes):
             if index not in self.state.done:
                 self._movement(index)
-        for sink in self.sinks:
-            sink.finish()
 
     def _frame(
         self, doc: dict[str, Any], t_ns: int, log_time_ns: int, keys: list[tuple[int, str]]

@@ -16,7 +16,11 @@ import click
 from data_schemas.errors import BslamError
 
 #: command name -> "module:attribute". Add a command by adding a line here.
-COMMANDS: dict[str, str] = {}
+COMMANDS: dict[str, str] = {
+    "process": "replay.cli.process:process",
+    "replay": "replay.cli.replay_log:replay",
+    "regress": "replay.cli.regress:regress",
+}
 
 
 class BslamGroup(click.Group):

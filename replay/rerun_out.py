@@ -1,0 +1,79 @@
+"""``bslam replay`` as a library call: one log through the stages into a Rerun recording."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import rerun as rr
+
+from data_schemas.errors import BslamError
+from replay.blueprint import method_blueprint
+from replay.fig1 import log_fig1
+from replay.logs import ProcessableLog
+from replay.process import process_log
+from replay.records import PRIORS, MethodConfig
+from replay.sinks.rerun_sink import RerunSink
+
+APPLICATION_ID = "bearing-slam"
+
+
+class ViewerError(BslamError):
+    """The Rerun viewer or server could not be started or reached."""
+
+
+@dataclass(frozen=True)
+class RerunTarget:
+    """Where the recording goes: a file, a spawned viewer, a running viewer, or a server."""
+
+    kind: Literal["save", "spawn", "connect", "serve"]
+    where: str | None = None
+
+
+def open_recording(name: str, target: RerunTarget) -> tuple[rr.RecordingStream, str | None]:
+    """A recording stream connected to ``target``; also the server URL when serving."""
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=name)
+    blueprint = method_blueprint(fig1_priors=PRIORS)
+    url = None
+    try:
+        if target.kind == "save":
+            assert target.where is not None
+            rec.save(target.where, default_blueprint=blueprint)
+        elif target.kind == "spawn":
+            rec.spawn(default_blueprint=blueprint)
+        elif target.kind == "connect":
+            rec.connect_grpc(target.where, default_blueprint=blueprint)
+        else:
+            url = rec.serve_grpc(default_blueprint=blueprint)
+    except (RuntimeError, OSError) as exc:
+        raise ViewerError(f"cannot open the Rerun {target.kind} target ({exc})") from None
+    return rec, url
+
+
+def replay_log(
+    log: str | os.PathLike[str],
+    method: MethodConfig,
+    rec: rr.RecordingStream,
+    *,
+    images: bool = True,
+    summary: str | os.PathLike[str] | None = None,
+) -> dict[str, Any]:
+    """Stream every stage of ``log`` to ``rec`` (plus Fig. 1); return the summary document."""
+    with ProcessableLog(log) as opened:
+        eps_rad = opened.session.vision_error_rad
+    log_fig1(rec, eps_rad)
+    doc = process_log(log, method, summary=summary, extra_sinks=(RerunSink(rec, images=images),))
+    return doc
+
+
+def save_rrd(
+    log: str | os.PathLike[str], method: MethodConfig, rrd: str | os.PathLike[str], **kw: Any
+) -> dict[str, Any]:
+    """Replay ``log`` into the file ``rrd`` (finished and closed on return)."""
+    rec, _ = open_recording(Path(log).stem, RerunTarget("save", os.fspath(rrd)))
+    try:
+        return replay_log(log, method, rec, **kw)
+    finally:
+        rec.disconnect()
