@@ -1,1 +1,1 @@
-"""Simulated world: a fake robot and camera that let the recorder run without hardware."""
+"""The simulated world: scenarios, arena geometry, movement planner, renderer, fake devices."""

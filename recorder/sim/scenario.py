@@ -1,0 +1,420 @@
+"""Simulation scenarios: load, validate and describe a scenario file.
+
+A scenario (JSON, schema ``bslam.Scenario``; metres, world frame with origin at an arena corner;
+angles in degrees with ``_deg`` suffixes) gives the arena, the landmarks (vertical cylinders),
+the reference pair, the camera, the vision error bound and the trajectory::
+
+    {
+      "arena": {"width": 1.05, "height": 0.68},
+      "landmarks": [{"name": "L1", "x": 0.375, "y": 0.55, "color": "red"}, ...],
+      "reference": ["L1", "L2"],
+      "camera": {"model": "unwrapped", "width": 255, "height": 176, "bearing_noise_deg": 1.0},
+      "vision_error_deg": 3.0,
+      "trajectory": {"start": [0.52, 0.34], "moves": 10, "distance": [0.10, 0.25], "seed": 7}
+    }
+
+Optional keys: ``description`` (text); landmark ``radius`` (m, default 0.01) and ``height``
+(m, default 0.15); camera ``bearing_noise_deg`` (default 0), ``pixel_noise`` (grey-level std,
+default 2) and ``lighting`` (bool, default true); ``robot.radius`` (m, default 0.03: the
+robot keeps this far from walls); trajectory ``start`` may hold a third element, the start
+heading in degrees; ``seed`` defaults to 0. ``moves`` is either a count of random moves (then
+``distance`` = [min, max] m is required) or an explicit list ``[{"turn_deg": 40,
+"distance": 0.2}, ...]``. Unknown keys are errors (they are usually typos).
+
+Public API
+----------
+- :func:`load_scenario` (path) and :func:`scenario_from_dict` (decoded JSON) ->
+  :class:`Scenario`; every problem is one :class:`~data_schemas.errors.ScenarioError` line
+  naming the key.
+- :func:`builtin_scenario` (``"paper"``, ``"paper_omni"``) and :data:`BUILTIN_SCENARIOS`.
+- :class:`Scenario`: ``world()``, ``calibration()``, ``to_dict()``, ``with_seed(seed)``,
+  ``landmark(name)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+from data_schemas.calibration import Calibration, UnwrappedCalibration, default_omni
+from data_schemas.codec import validate
+from data_schemas.errors import ScenarioError, SchemaError
+from recorder.sim.world import Arena, Landmark, Pose, SimWorld
+
+DEFAULT_LANDMARK_RADIUS_M = 0.01
+DEFAULT_LANDMARK_HEIGHT_M = 0.15
+DEFAULT_ROBOT_RADIUS_M = 0.03
+DEFAULT_PIXEL_NOISE = 2.0
+#: Straight paths keep the robot's edge this far from a landmark's surface (m).
+LANDMARK_CLEARANCE_M = 0.03
+
+BUILTIN_SCENARIOS: tuple[str, ...] = ("paper", "paper_omni")
+
+# Allowed keys per object (the schema's properties; checked first for "did you mean" hints).
+_KEYS: dict[str, tuple[str, ...]] = {
+    "": (
+        "description",
+        "arena",
+        "landmarks",
+        "reference",
+        "camera",
+        "vision_error_deg",
+        "trajectory",
+        "robot",
+    ),
+    "arena": ("width", "height"),
+    "landmarks[]": ("name", "x", "y", "color", "radius", "height"),
+    "camera": ("model", "width", "height", "bearing_noise_deg", "pixel_noise", "lighting"),
+    "trajectory": ("start", "moves", "distance", "seed"),
+    "trajectory.moves[]": ("turn_deg", "distance"),
+    "robot": ("radius",),
+}
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """The simulated camera.
+
+    Attributes
+    ----------
+    model : {"unwrapped", "omni"}
+    width, height : int
+        Image size, pixels.
+    bearing_noise_rad : float
+        Std of the Gaussian bearing noise (before truncation at the vision error bound).
+    pixel_noise : float
+        Std of the per-pixel noise, grey levels (0..255).
+    lighting : bool
+        Whether frames get lighting variation (global gain and a gradient).
+    """
+
+    model: Literal["unwrapped", "omni"]
+    width: int
+    height: int
+    bearing_noise_rad: float = 0.0
+    pixel_noise: float = DEFAULT_PIXEL_NOISE
+    lighting: bool = True
+
+
+@dataclass(frozen=True)
+class Move:
+    """One straight movement: turn in place by ``turn_rad`` (CCW), then drive ``distance_m``."""
+
+    turn_rad: float
+    distance_m: float
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Where the robot starts and how it moves.
+
+    Exactly one of ``random_count`` and ``moves`` is set.
+
+    Attributes
+    ----------
+    start_world : (x, y, heading)
+        Start pose, m and rad, world frame.
+    random_count : int or None
+        Number of random moves.
+    distance_range_m : (float, float) or None
+        Range of random move distances, m.
+    moves : tuple of Move or None
+        Explicit moves.
+    seed : int
+        Seed of the random moves (and the default seed of the simulation).
+    """
+
+    start_world: Pose
+    random_count: int | None = None
+    distance_range_m: tuple[float, float] | None = None
+    moves: tuple[Move, ...] | None = None
+    seed: int = 0
+
+    @property
+    def n_moves(self) -> int:
+        """Number of straight movements."""
+        if self.moves is not None:
+            return len(self.moves)
+        assert self.random_count is not None
+        return self.random_count
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated simulation scenario (see the module docstring for the file format)."""
+
+    arena: Arena
+    landmarks: tuple[Landmark, ...]
+    reference: tuple[str, str]
+    camera: CameraSpec
+    vision_error_rad: float
+    trajectory: Trajectory
+    robot_radius_m: float = DEFAULT_ROBOT_RADIUS_M
+    description: str = ""
+
+    def world(self) -> SimWorld:
+        """The arena and landmarks as a :class:`~recorder.sim.world.SimWorld`."""
+        return SimWorld(self.arena, self.landmarks)
+
+    def landmark(self, name: str) -> Landmark:
+        """The landmark called ``name`` (KeyError if absent)."""
+        for lm in self.landmarks:
+            if lm.name == name:
+                return lm
+        raise KeyError(name)
+
+    def calibration(self) -> Calibration:
+        """The camera calibration the simulator renders with."""
+        if self.camera.model == "unwrapped":
+            return UnwrappedCalibration(self.camera.width, self.camera.height)
+        return default_omni(self.camera.width, self.camera.height)
+
+    def with_seed(self, seed: int) -> Scenario:
+        """The same scenario with ``trajectory.seed`` replaced (``--seed`` on the CLI)."""
+        return dataclasses.replace(
+            self, trajectory=dataclasses.replace(self.trajectory, seed=int(seed))
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The scenario as JSON (defaults filled in), valid against ``bslam.Scenario``."""
+        traj = self.trajectory
+        start = [traj.start_world[0], traj.start_world[1], _deg(traj.start_world[2])]
+        traj_doc: dict[str, Any] = {"start": start, "seed": traj.seed}
+        if traj.moves is not None:
+            traj_doc["moves"] = [
+                {"turn_deg": _deg(m.turn_rad), "distance": m.distance_m} for m in traj.moves
+            ]
+        else:
+            traj_doc["moves"] = traj.random_count
+            assert traj.distance_range_m is not None
+            traj_doc["distance"] = list(traj.distance_range_m)
+        doc: dict[str, Any] = {
+            "arena": {"width": self.arena.width_m, "height": self.arena.height_m},
+            "landmarks": [
+                {
+                    "name": lm.name,
+                    "x": lm.x,
+                    "y": lm.y,
+                    "color": lm.color,
+                    "radius": lm.radius_m,
+                    "height": lm.height_m,
+                }
+                for lm in self.landmarks
+            ],
+            "reference": list(self.reference),
+            "camera": {
+                "model": self.camera.model,
+                "width": self.camera.width,
+                "height": self.camera.height,
+                "bearing_noise_deg": _deg(self.camera.bearing_noise_rad),
+                "pixel_noise": self.camera.pixel_noise,
+                "lighting": self.camera.lighting,
+            },
+            "vision_error_deg": _deg(self.vision_error_rad),
+            "trajectory": traj_doc,
+            "robot": {"radius": self.robot_radius_m},
+        }
+        if self.description:
+            doc["description"] = self.description
+        return doc
+
+
+def _deg(angle_rad: float) -> float:
+    """Degrees for JSON, rounded so that a degree value survives the round trip exactly."""
+    return round(math.degrees(angle_rad), 9)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario file.
+
+    Raises
+    ------
+    ScenarioError
+        One line naming the file and the offending key.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ScenarioError(f"scenario file {str(p)!r} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"cannot read scenario file {str(p)!r}: {exc}") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ScenarioError(
+            f"scenario {p.name}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from None
+    return scenario_from_dict(doc, what=f"scenario {p.name}")
+
+
+def builtin_scenario(name: str) -> Scenario:
+    """A scenario shipped with bearing-slam (see :data:`BUILTIN_SCENARIOS`)."""
+    if name not in BUILTIN_SCENARIOS:
+        raise ScenarioError(
+            f"unknown built-in scenario {name!r}; choose one of {', '.join(BUILTIN_SCENARIOS)}"
+        )
+    text = resources.files("recorder.sim").joinpath("scenarios", f"{name}.json").read_text()
+    return scenario_from_dict(json.loads(text), what=f"built-in scenario {name!r}")
+
+
+def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
+    """Validate decoded scenario JSON and build a :class:`Scenario` (raise ScenarioError)."""
+    if not isinstance(doc, dict):
+        raise ScenarioError(f"{what}: must be a JSON object")
+    _check_keys(doc, what)
+    try:
+        validate("bslam.Scenario", doc, what=what)
+    except SchemaError as exc:
+        raise ScenarioError(str(exc)) from None
+
+    def fail(key: str, message: str) -> ScenarioError:
+        return ScenarioError(f"{what}: key {key!r}: {message}")
+
+    arena = Arena(float(doc["arena"]["width"]), float(doc["arena"]["height"]))
+    landmarks = []
+    seen: set[str] = set()
+    for i, d in enumerate(doc["landmarks"]):
+        key = f"landmarks[{i}]"
+        if d["name"] in seen:
+            raise fail(f"{key}.name", f"duplicate landmark name {d['name']!r}")
+        seen.add(d["name"])
+        lm = Landmark(
+            d["name"],
+            float(d["x"]),
+            float(d["y"]),
+            d["color"],
+            float(d.get("radius", DEFAULT_LANDMARK_RADIUS_M)),
+            float(d.get("height", DEFAULT_LANDMARK_HEIGHT_M)),
+        )
+        if not (lm.radius_m <= lm.x <= arena.width_m - lm.radius_m) or not (
+            lm.radius_m <= lm.y <= arena.height_m - lm.radius_m
+        ):
+            raise fail(
+                key,
+                f"landmark {lm.name} at ({lm.x:g}, {lm.y:g}) m is outside the "
+                f"{arena.width_m:g} x {arena.height_m:g} m arena",
+            )
+        landmarks.append(lm)
+
+    ref = doc["reference"]
+    for r in ref:
+        if r not in seen:
+            raise fail("reference", f"{r!r} is not a landmark name (have {sorted(seen)})")
+    if ref[0] == ref[1]:
+        raise fail("reference", f"the two reference landmarks must differ, got {ref}")
+
+    cam = doc["camera"]
+    camera = CameraSpec(
+        cam["model"],
+        int(cam["width"]),
+        int(cam["height"]),
+        math.radians(float(cam.get("bearing_noise_deg", 0.0))),
+        float(cam.get("pixel_noise", DEFAULT_PIXEL_NOISE)),
+        bool(cam.get("lighting", True)),
+    )
+    robot_radius = float(doc.get("robot", {}).get("radius", DEFAULT_ROBOT_RADIUS_M))
+
+    t = doc["trajectory"]
+    start = t["start"]
+    start_world: Pose = (
+        float(start[0]),
+        float(start[1]),
+        math.radians(float(start[2])) if len(start) > 2 else 0.0,
+    )
+    if not arena.contains(start_world[0], start_world[1]):
+        raise fail(
+            "trajectory.start",
+            f"({start_world[0]:g}, {start_world[1]:g}) m is outside the "
+            f"{arena.width_m:g} x {arena.height_m:g} m arena",
+        )
+    seed = int(t.get("seed", 0))
+    if isinstance(t["moves"], int):
+        if "distance" not in t:
+            raise fail("trajectory.distance", "random moves need a distance range [min, max] (m)")
+        lo, hi = (float(v) for v in t["distance"])
+        if lo > hi:
+            raise fail(
+                "trajectory.distance", f"range is inverted: [{lo:g}, {hi:g}]; give [min, max]"
+            )
+        trajectory = Trajectory(start_world, int(t["moves"]), (lo, hi), None, seed)
+    else:
+        if "distance" in t:
+            raise fail("trajectory.distance", "only used with random moves (moves is a list here)")
+        moves = tuple(
+            Move(math.radians(float(m["turn_deg"])), float(m["distance"])) for m in t["moves"]
+        )
+        trajectory = Trajectory(start_world, None, None, moves, seed)
+
+    scenario = Scenario(
+        arena,
+        tuple(landmarks),
+        (ref[0], ref[1]),
+        camera,
+        math.radians(float(doc["vision_error_deg"])),
+        trajectory,
+        robot_radius,
+        str(doc.get("description", "")),
+    )
+    if trajectory.moves is not None:
+        _check_explicit_moves(scenario, fail)
+    return scenario
+
+
+def _check_explicit_moves(scenario: Scenario, fail: Any) -> None:
+    """Dead-reckon the explicit moves from the start pose; reject the first unsafe one."""
+    world = scenario.world()
+    x, y, h = scenario.trajectory.start_world
+    assert scenario.trajectory.moves is not None
+    for i, m in enumerate(scenario.trajectory.moves):
+        problem = world.move_problem(
+            (x, y, h),
+            m.turn_rad,
+            m.distance_m,
+            margin_m=scenario.robot_radius_m,
+            clearance_m=LANDMARK_CLEARANCE_M,
+        )
+        if problem is not None:
+            raise fail(
+                f"trajectory.moves[{i}]",
+                f"turn {math.degrees(m.turn_rad):g} deg then {m.distance_m:g} m from "
+                f"({x:.3f}, {y:.3f}) m {problem}",
+            )
+        h += m.turn_rad
+        x, y = x + m.distance_m * math.cos(h), y + m.distance_m * math.sin(h)
+
+
+def _check_keys(doc: dict[str, Any], what: str) -> None:
+    """Reject unknown keys (with a 'did you mean' hint) in the top level and known objects."""
+
+    def check(obj: Any, allowed_key: str, where: str) -> None:
+        if not isinstance(obj, dict):
+            return  # the schema reports the wrong type
+        allowed = _KEYS[allowed_key]
+        for key in obj:
+            if key not in allowed:
+                close = difflib.get_close_matches(key, allowed, n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                full = f"{where}.{key}" if where else key
+                raise ScenarioError(
+                    f"{what}: unknown key {full!r}{hint} (allowed: {', '.join(allowed)})"
+                )
+
+    check(doc, "", "")
+    for name in ("arena", "camera", "trajectory", "robot"):
+        check(doc.get(name), name, name)
+    landmarks = doc.get("landmarks")
+    if isinstance(landmarks, list):
+        for i, lm in enumerate(landmarks):
+            check(lm, "landmarks[]", f"landmarks[{i}]")
+    traj = doc.get("trajectory")
+    moves = traj.get("moves") if isinstance(traj, dict) else None
+    if isinstance(moves, list):
+        for i, m in enumerate(moves):
+            check(m, "trajectory.moves[]", f"trajectory.moves[{i}]")
