@@ -155,6 +155,11 @@ class LogWriter:
         """Messages in complete chunks already handed to the operating system."""
         return self._committed_messages
 
+    @property
+    def failed(self) -> bool:
+        """True once a write error (e.g. disk full) stopped the writer."""
+        return self._error is not None
+
     def write(self, topic_name: str, msg: dict[str, Any], *, schema: str | None = None) -> int:
         """Validate and write one message; return its ``log_time`` (ns).
 

@@ -1,0 +1,365 @@
+"""The record loop: turn, keyframe at rest, drive while capturing frames, keyframe; repeat.
+
+For each movement ``i`` (see :func:`record_session`)::
+
+    turn in place by turn_rad          (no frames; the robot is not at a keyframe pose yet)
+    stop, keyframe at rest             /camera/panorama, /robot/odometry, /robot/movement start
+    drive distance_m, capturing        /camera/panorama at frame_rate_hz
+    stop, keyframe at rest             /camera/panorama, /robot/odometry, /robot/movement end
+
+Every serial exchange goes to ``/robot/command`` (the robot's ``on_exchange``, see
+:class:`CommandSink`), events and faults to ``/log``, and in simulation the true pose at every
+frame to ``/sim/ground_truth``. Time stamps come from one clock (use
+:class:`recorder.timebase.EpochClock`).
+
+Stopping: :func:`stop_on_signals` turns SIGINT/SIGTERM into :class:`RecordingInterrupted`,
+raised at the next safe point (between serial exchanges and writes, at least every ``poll_s``),
+so no message is half written; a second signal raises at once. On any exception the loop logs
+it to ``/log``, stops the motors (``D,0,0``) if it can, and re-raises; the caller's
+``with LogWriter(...)`` then finishes an indexed file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from types import FrameType
+from typing import Any
+
+import numpy as np
+
+from data_schemas.angles import wrap_rad
+from data_schemas.errors import BslamError, LogError
+from data_schemas.stamps import stamp_from_ns
+from recorder.camera import Camera
+from recorder.clock import Clock
+from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message, png_params
+from recorder.robot import Robot, drive, turn
+from recorder.writer import LogWriter
+
+#: ``foxglove.Log`` levels.
+INFO, WARNING, ERROR = 2, 3, 4
+LOG_NAME = "bslam.recorder"
+
+#: A callable returning the true pose ``(x, y, heading)`` (m, rad, world frame) right now.
+GroundTruth = Callable[[], Sequence[float]]
+
+
+@dataclass(frozen=True)
+class Move:
+    """One movement: turn in place by ``turn_rad`` (CCW), then drive ``distance_m`` straight."""
+
+    turn_rad: float
+    distance_m: float
+
+
+def random_moves(
+    rng: np.random.Generator,
+    count: int | None,
+    distance_m: tuple[float, float],
+    turn_rad: float | None = None,
+) -> Iterator[Move]:
+    """Moves for a real robot: turn uniform in [-pi, pi) (or ``turn_rad``), distance uniform.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Source of the pseudo-random turns and distances.
+    count : int or None
+        Number of moves; None for endless (stop with Ctrl-C).
+    distance_m : (float, float)
+        Range of the straight distance, metres (equal bounds for a fixed distance).
+    turn_rad : float, optional
+        Fixed turn instead of a random one.
+    """
+    lo, hi = distance_m
+    if not 0 < lo <= hi:
+        raise ValueError(f"distance range must satisfy 0 < lo <= hi, got {distance_m}")
+    i = 0
+    while count is None or i < count:
+        angle = (
+            turn_rad if turn_rad is not None else wrap_rad(float(rng.uniform(-math.pi, math.pi)))
+        )
+        yield Move(angle, float(rng.uniform(lo, hi)) if hi > lo else lo)
+        i += 1
+
+
+@dataclass(frozen=True)
+class Progress:
+    """Sent to the progress callback after each movement."""
+
+    movements: int
+    frames: int
+
+
+@dataclass(frozen=True)
+class RecordResult:
+    """What a session recorded: completed movements and frames."""
+
+    movements: int
+    frames: int
+
+
+class RecordingInterrupted(BaseException):
+    """SIGINT or SIGTERM asked the recorder to stop (a BaseException, like KeyboardInterrupt)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(f"recording stopped by {signal.Signals(signum).name}")
+
+
+class _SignalFlag:
+    """Pending stop request set by the signal handler, checked at safe points."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def check(self) -> None:
+        if self.signum is not None:
+            raise RecordingInterrupted(self.signum)
+
+
+_FLAG = _SignalFlag()
+
+
+@contextlib.contextmanager
+def stop_on_signals(
+    signums: Iterable[int] = (signal.SIGINT, signal.SIGTERM),
+) -> Iterator[None]:
+    """Within the block, SIGINT/SIGTERM stop the recording cleanly (see module docstring).
+
+    The first signal sets a flag that :func:`record_session` turns into
+    :class:`RecordingInterrupted` at its next safe point; a second one raises immediately.
+    Python's default SIGTERM would end the process without running ``finally`` blocks.
+    """
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if _FLAG.signum is not None:
+            raise RecordingInterrupted(signum)
+        _FLAG.signum = signum
+
+    previous = {s: signal.signal(s, handler) for s in signums}
+    _FLAG.signum = None
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+        _FLAG.signum = None
+
+
+class CommandSink:
+    """The robot's ``on_exchange``: holds ``/robot/command`` messages until a writer is attached.
+
+    The robot is opened (and answers) before the log is created, so a wrong port never leaves an
+    empty log behind; its first exchanges are written once the log exists.
+    """
+
+    def __init__(self) -> None:
+        self._pending: list[dict[str, Any]] = []
+        self._writer: LogWriter | None = None
+
+    def attach(self, writer: LogWriter) -> None:
+        """Write the held messages, then write each new one at once."""
+        self._writer = writer
+        pending, self._pending = self._pending, []
+        for msg in pending:
+            writer.write("/robot/command", msg)
+
+    def __call__(self, msg: dict[str, Any]) -> None:
+        if self._writer is None:
+            self._pending.append(msg)
+            return
+        if self._writer.failed:
+            return  # the log already raised its error; stopping the motors must still work
+        self._writer.write("/robot/command", msg)
+
+
+@dataclass
+class _Recorder:
+    robot: Robot
+    camera: Camera
+    writer: LogWriter
+    clock: Clock
+    frame_period_ns: int
+    encoding: Encoding
+    png: list[int]
+    ground_truth: GroundTruth | None
+    frames: int = 0
+    last_frame_ns: int | None = None
+
+    def log(self, level: int, text: str) -> None:
+        _FLAG.check()
+        self.writer.write(
+            "/log",
+            {
+                "timestamp": stamp_from_ns(self.clock.monotonic_ns()),
+                "level": level,
+                "message": text,
+                "name": LOG_NAME,
+                "file": "",
+                "line": 0,
+            },
+        )
+
+    def frame(self) -> int:
+        """Capture, write a frame (and the true pose in simulation); return its time stamp."""
+        _FLAG.check()
+        t_ns = self.clock.monotonic_ns()
+        image = self.camera.read()
+        msg = frame_message(image, t_ns, encoding=self.encoding, params=self.png)
+        self.writer.write("/camera/panorama", msg, schema=IMAGE_SCHEMA[self.encoding])
+        if self.ground_truth is not None:
+            x, y, heading = self.ground_truth()
+            self.writer.write(
+                "/sim/ground_truth",
+                {
+                    "timestamp": stamp_from_ns(t_ns),
+                    "x": float(x),
+                    "y": float(y),
+                    "heading": wrap_rad(float(heading)),
+                },
+            )
+        self.frames += 1
+        self.last_frame_ns = t_ns
+        return t_ns
+
+    def frame_if_due(self) -> None:
+        """``on_poll`` while driving: a frame every ``frame_period_ns``."""
+        _FLAG.check()
+        now = self.clock.monotonic_ns()
+        if self.last_frame_ns is None or now - self.last_frame_ns >= self.frame_period_ns:
+            self.frame()
+
+    def keyframe(self, index: int, phase: str, move: Move) -> None:
+        """At rest: keyframe, odometry, and the movement message pointing at the keyframe."""
+        self.robot.stop()
+        t_key = self.frame()
+        left, right = self.robot.read_position_counters()
+        config = self.robot.config
+        now = stamp_from_ns(self.clock.monotonic_ns())
+        self.writer.write(
+            "/robot/odometry",
+            {
+                "timestamp": now,
+                "left_pulses": left,
+                "right_pulses": right,
+                "mm_per_pulse": config.mm_per_pulse,
+            },
+        )
+        self.writer.write(
+            "/robot/movement",
+            {
+                "timestamp": now,
+                "index": index,
+                "phase": phase,
+                "keyframe_timestamp": stamp_from_ns(t_key),
+                "turn_rad": move.turn_rad,
+                "distance_m": move.distance_m,
+            },
+        )
+
+
+def record_session(
+    *,
+    robot: Robot,
+    camera: Camera,
+    writer: LogWriter,
+    clock: Clock,
+    moves: Iterable[Move],
+    frame_rate_hz: float = 5.0,
+    encoding: Encoding = "png",
+    png_level: int = 1,
+    poll_s: float = 0.05,
+    ground_truth: GroundTruth | None = None,
+    progress: Callable[[Progress], None] | None = None,
+) -> RecordResult:
+    """Run the movement plan and record everything into ``writer``.
+
+    Parameters
+    ----------
+    robot : Robot
+        Open robot whose ``on_exchange`` writes ``/robot/command`` (see :class:`CommandSink`).
+    camera : Camera
+        Frame source; its calibration is in the session document.
+    writer : LogWriter
+        Open log; the caller finishes it (``with LogWriter(...)``), also after an error.
+    clock : Clock
+        The session clock (the writer's and the robot's).
+    moves : iterable of Move
+        The plan; pulled one at a time (a simulator may plan from the true pose).
+    frame_rate_hz : float
+        Frames per second captured while driving (keyframes come in addition).
+    encoding : {"png", "bgr8"}
+        Frame storage; see :mod:`recorder.frames`.
+    png_level : int
+        PNG compression 0..9 (see :mod:`recorder.frames`).
+    poll_s : float
+        Motion-status polling period, seconds (also the signal-check period).
+    ground_truth : callable, optional
+        Simulation only: the true pose now; written with every frame.
+    progress : callable, optional
+        Called with :class:`Progress` after each movement.
+
+    Raises
+    ------
+    RecordingInterrupted
+        SIGINT/SIGTERM (inside :func:`stop_on_signals`); the motors are stopped.
+    BslamError
+        Robot, camera or disk fault; logged to ``/log`` when possible, motors stopped.
+    """
+    if frame_rate_hz <= 0:
+        raise ValueError(f"frame rate must be > 0 Hz, got {frame_rate_hz}")
+    rec = _Recorder(
+        robot=robot,
+        camera=camera,
+        writer=writer,
+        clock=clock,
+        frame_period_ns=round(1e9 / frame_rate_hz),
+        encoding=encoding,
+        png=png_params(png_level),
+        ground_truth=ground_truth,
+    )
+    poll = min(poll_s, 1.0 / frame_rate_hz)
+    config = robot.config
+    done = 0
+    try:
+        rec.log(INFO, f"session started: robot {config.model} on {config.port}")
+        for index, move in enumerate(moves):
+            rec.log(
+                INFO,
+                f"movement {index}: turn {math.degrees(move.turn_rad):.1f} deg, "
+                f"drive {move.distance_m:.3f} m",
+            )
+            turn(robot, config, move.turn_rad, clock, poll_s=poll, on_poll=_FLAG.check)
+            rec.keyframe(index, "start", move)
+            rec.last_frame_ns = clock.monotonic_ns()
+            drive(robot, config, move.distance_m, clock, poll_s=poll, on_poll=rec.frame_if_due)
+            rec.keyframe(index, "end", move)
+            done += 1
+            if progress is not None:
+                progress(Progress(done, rec.frames))
+        rec.log(INFO, f"session finished: {done} movements, {rec.frames} frames")
+    except RecordingInterrupted as exc:
+        _stop_after(rec, WARNING, f"{exc}; {done} movements complete")
+        raise
+    except BslamError as exc:
+        _stop_after(rec, ERROR, f"fault after {done} movements: {exc}")
+        raise
+    except BaseException as exc:
+        _stop_after(rec, ERROR, f"recorder crashed after {done} movements: {exc!r}")
+        raise
+    return RecordResult(done, rec.frames)
+
+
+def _stop_after(rec: _Recorder, level: int, text: str) -> None:
+    """Best effort after a failure: log it, stop the motors; never mask the original error."""
+    _FLAG.signum = None  # the stop request is being honoured: do not raise it again
+    if not rec.writer.failed:
+        with contextlib.suppress(LogError):
+            rec.log(level, text)
+    with contextlib.suppress(BslamError):
+        rec.robot.stop()
