@@ -20,6 +20,7 @@ COMMANDS: dict[str, str] = {
     "process": "replay.cli.process:process",
     "replay": "replay.cli.replay_log:replay",
     "regress": "replay.cli.regress:regress",
+    "experiment": "replay.cli.experiment:experiment",
 }
 
 

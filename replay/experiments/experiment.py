@@ -145,18 +145,20 @@ def render_paper(results: Results, out_dir: Path) -> dict[str, str]:
 
 
 def fig1(results: Results, path: Path) -> Path:
-    """The three priors of one bearing (eps of the experiment) on a grid, as in the paper."""
-    from pipeline.priors import R_MAX_FR, R_MIN_FR, prior_density_grid
+    """The three priors of one bearing (eps of the experiment), as in the paper's Fig. 1."""
+    from pipeline.priors import make_prior, prior_density_grid, range_marginal
+    from replay.fig1 import R_MAX, R_MIN
 
     eps_rad = math.radians(float(results.config["scenario"]["vision_error_deg"]))
-    r_max = min(R_MAX_FR, 4.0)
-    xs = np.linspace(-0.2, r_max, 240)
-    ys = np.linspace(-0.6, 0.6, 120)
-    densities = {
-        p: prior_density_grid(p, 0.0, eps_rad, R_MIN_FR, r_max, xs, ys)
-        for p in ("impartial", "gaussian", "mixture")
-    }
-    return plots.fig1_priors(xs, ys, densities, path)
+    half = R_MAX * math.tan(1.6 * eps_rad)
+    xs = np.linspace(0.0, R_MAX, 240)
+    ys = np.linspace(-half, half, 120)
+    r = np.linspace(R_MIN, R_MAX, 80)
+    densities, marginals = {}, {}
+    for name in ("impartial", "gaussian", "mixture"):
+        densities[name] = prior_density_grid(name, 0.0, eps_rad, R_MIN, R_MAX, xs, ys)
+        marginals[name] = range_marginal(make_prior(name, eps_rad, R_MIN, R_MAX), r)
+    return plots.fig1_priors(xs, ys, densities, r, marginals, path)
 
 
 def sweep_experiment(

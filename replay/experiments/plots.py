@@ -119,28 +119,41 @@ def fig1_priors(
     x_fr: NDArray[np.float64],
     y_fr: NDArray[np.float64],
     densities: dict[str, NDArray[np.float64]],
+    r: NDArray[np.float64],
+    range_marginals: dict[str, NDArray[np.float64]],
     path: Path,
 ) -> Path:
-    """Fig. 1: the single-view prior densities over one grid, side by side.
+    """Fig. 1: each prior's density of one bearing, and their range marginals p(r).
 
     Parameters
     ----------
     x_fr, y_fr : ndarray, shape (W,), (H,)
-        Grid axes (robot at the origin, bearing along +x).
+        Grid axes (observer at the origin, bearing along +x).
     densities : dict of str -> ndarray, shape (H, W)
         Density of each prior on the grid.
+    r : ndarray, shape (k,)
+        Ranges of the marginals.
+    range_marginals : dict of str -> ndarray, shape (k,)
+        p(r) of each prior (the impartial PDF's is flat).
     path : Path
         PNG to write.
     """
-    fig = Figure(figsize=(4.0 * len(densities), 3.4))
+    n = len(densities)
+    fig = Figure(figsize=(3.6 * (n + 1), 3.2))
     for i, (name, dens) in enumerate(densities.items()):
-        ax = fig.add_subplot(1, len(densities), i + 1)
-        ax.pcolormesh(x_fr, y_fr, dens, shading="auto", cmap="viridis")
+        ax = fig.add_subplot(1, n + 1, i + 1)
+        ax.pcolormesh(x_fr, y_fr, np.sqrt(dens / dens.max()), shading="auto", cmap="viridis")
         ax.set_title(METHOD_LABELS.get(name, name))
-        ax.set_aspect("equal")
-        ax.set_xlabel("x")
+        ax.set_xlabel("x (movement lengths)")
         if i == 0:
             ax.set_ylabel("y")
+    ax = fig.add_subplot(1, n + 1, n + 1)
+    for name, marginal in range_marginals.items():
+        ax.plot(r, marginal, color=METHOD_COLORS.get(name, "gray"), label=METHOD_LABELS[name])
+    ax.set_xlabel("range r")
+    ax.set_ylabel("p(r)")
+    ax.set_title("range marginals")
+    ax.legend(fontsize="small")
     return _save(fig, path)
 
 

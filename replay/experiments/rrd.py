@@ -5,19 +5,22 @@ Entities (each a scalar series with its 80% band as ``lo``/``hi`` siblings where
 - ``fig7/<landmark>/{mean,lo,hi}`` on timeline ``movement`` (impartial prior, n_l);
 - ``fig8/{mean,lo,hi}`` on timeline ``n_l`` (after ``n_l_movements`` movements);
 - ``comparison/<method>`` on timeline ``movement`` (mean over runs and scored landmarks);
-- ``calibration/<method>`` on timeline ``movement`` (share of 80% regions holding the truth).
+- ``calibration/<method>`` on timeline ``movement`` (share of 80% regions holding the truth);
+- ``fig1/...``: the three priors of one bearing (:func:`replay.fig1.log_fig1`).
 
 Values in centimetres (calibration: a fraction).
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import rerun as rr
 
 from replay.experiments.results import CRB, Results
 from replay.experiments.stats import Band, calibration, movement_curve, n_l_curve, select
+from replay.fig1 import log_fig1
 
 APPLICATION_ID = "bslam_experiment"
 
@@ -39,6 +42,7 @@ def write_rrd(results: Results, path: Path) -> Path:
     scored = cfg["scored_landmarks"]
     rec = rr.RecordingStream(APPLICATION_ID)
     rec.save(path)
+    log_fig1(rec, math.radians(float(cfg["scenario"]["vision_error_deg"])))
     for name in scored:
         bands = movement_curve(results.rows, method="impartial", n_l=proto["n_l"], landmarks=[name])
         _log_bands(rec, f"fig7/{name}", "movement", bands)

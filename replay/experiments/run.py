@@ -6,7 +6,6 @@ summary stay on disk (``run_000.mcap``, ``run_000.summary.json``) for ``bslam re
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -14,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from replay.experiments.geometry import scored_landmarks
 from replay.experiments.methods import (
@@ -52,23 +52,19 @@ class RunOutput:
 def run_one(task: RunTask) -> RunOutput:
     """Simulate, process and score one run (every method of ``task.protocol``)."""
     from recorder.record import simulate_log
+    from replay.process import process_log
     from replay.records import MethodConfig
-    from replay.sinks.summary import SummarySink
-    from replay.stages import run_log
 
     proto = task.protocol
     out = RunOutput()
     log = Path(task.log)
     tick = time.perf_counter()
-    sim = simulate_log(task.scenario, log, seed=task.seed)
+    simulate_log(task.scenario, log, seed=task.seed)
     out.seconds["simulate"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
     method = MethodConfig(prior="impartial", n_r=proto.n_r, n_l=proto.n_l, seed=task.seed)
-    sink = SummarySink()
-    run_log(log, method, [sink])
-    summary = sink.document
-    log.with_suffix(".summary.json").write_text(json.dumps(summary, indent=1), encoding="utf-8")
+    summary = process_log(log, method, summary=log.with_suffix(".summary.json"))
     out.seconds["process"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
@@ -106,8 +102,26 @@ def run_one(task: RunTask) -> RunOutput:
         out.rows += batch_ls_rows(observations, ctx)
     if proto.crb:
         truth = truth_from_scenario(task.scenario, ctx.reference)
-        out.rows += crb_rows(sim.keyframes_world, truth.landmarks_world, ctx, _sigma_rad(task))
+        keyframes = true_keyframes(log)
+        out.rows += crb_rows(keyframes, truth.landmarks_world, ctx, _sigma_rad(task))
     out.seconds["yardsticks"] = time.perf_counter() - tick
+    return out
+
+
+def true_keyframes(log: Path) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """True (O1, O2) positions (m, world) of every complete movement of a simulated log."""
+    from replay.logs import ProcessableLog
+    from replay.plan import read_plan
+
+    with ProcessableLog(log) as opened:
+        plan = read_plan(opened)
+    out = []
+    for index in sorted(plan.keyframes):
+        phases = plan.keyframes[index]
+        if "start" in phases and "end" in phases:
+            o1, o2 = plan.true_position(phases["start"]), plan.true_position(phases["end"])
+            if o1 is not None and o2 is not None:
+                out.append((o1, o2))
     return out
 
 
