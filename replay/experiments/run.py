@@ -6,6 +6,7 @@ summary stay on disk (``run_000.mcap``, ``run_000.summary.json``) for ``bslam re
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -51,7 +52,6 @@ class RunOutput:
 
 def run_one(task: RunTask) -> RunOutput:
     """Simulate, process and score one run (every method of ``task.protocol``)."""
-    from recorder.record import simulate_log
     from replay.process import process_log
     from replay.records import MethodConfig
 
@@ -59,7 +59,7 @@ def run_one(task: RunTask) -> RunOutput:
     out = RunOutput()
     log = Path(task.log)
     tick = time.perf_counter()
-    simulate_log(task.scenario, log, seed=task.seed)
+    simulate(task.scenario, log, seed=task.seed)
     out.seconds["simulate"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
@@ -106,6 +106,20 @@ def run_one(task: RunTask) -> RunOutput:
         out.rows += crb_rows(keyframes, truth.landmarks_world, ctx, _sigma_rad(task))
     out.seconds["yardsticks"] = time.perf_counter() - tick
     return out
+
+
+def simulate(scenario: dict[str, Any], log: Path, *, seed: int) -> None:
+    """Write the run's scenario beside the log and simulate it (``bslam simulate``, in process).
+
+    Going through the command keeps to its contract (``--scenario``, ``--out``, ``--seed``)
+    without a new interpreter per run; a user error surfaces as ``click.ClickException``.
+    """
+    from replay.cli import cli
+
+    scenario_path = log.with_suffix(".scenario.json")
+    scenario_path.write_text(json.dumps(scenario, indent=1) + "\n", encoding="utf-8")
+    args = ["simulate", "--scenario", str(scenario_path), "--out", str(log), "--seed", str(seed)]
+    cli.main(args, prog_name="bslam", standalone_mode=False)
 
 
 def true_keyframes(log: Path) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
