@@ -119,10 +119,11 @@ def paper_experiment(
         tasks, workers=workers, scheduler=scheduler, progress=progress, desc="paper runs"
     )
     info = {"command": command, "workers": workers, "scheduler": scheduler, "stage_s": stages}
+    info["runs_s"] = round(time.perf_counter() - start, 2)
     results = Results("paper", _config(protocol, doc), records, rows, info)
+    figures = render_paper(results, out_dir)
     results.info["elapsed_s"] = round(time.perf_counter() - start, 2)
     write_results(results, out_dir)
-    figures = render_paper(results, out_dir)
     write_report(results, out_dir, figures)
     return results
 
