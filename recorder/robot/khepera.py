@@ -12,7 +12,8 @@ Every attempt of every exchange is reported to ``on_exchange`` as a ``/robot/com
 dict (``bslam.RobotCommand``): time stamp from the injected clock (monotonic), request and reply
 lines, outcome (``ok``, ``timeout``, ``garbled``, ``protocol_error``, ``disconnected``), latency
 and attempt number. A timeout or garbled reply is retried at most ``config.retries`` times, each
-after resynchronising the line (flush input, send a bare CR, drain until quiet). A ``z`` reply
+after resynchronising the line (flush input, send a bare CR, drain until quiet); the line is
+also resynchronised after the last failed attempt, so the next command starts clean. A ``z`` reply
 (protocol error) is not retried: the line is resynchronised and :class:`RobotProtocolError`
 raised. A port that vanishes raises :class:`RobotDisconnected`. Not thread-safe: one caller.
 """
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import termios
+import sys
 from collections.abc import Callable
 from types import TracebackType
 from typing import Any
@@ -47,7 +48,13 @@ _MISSING = {errno.ENOENT, errno.ENODEV, errno.ENXIO}
 _BUSY = {errno.EAGAIN, errno.EWOULDBLOCK, errno.EBUSY}
 _DENIED = {errno.EACCES, errno.EPERM}
 _DRAIN_MAX_READS = 64
-_LinkErrors = (serial.SerialException, OSError, termios.error)
+if sys.platform == "win32":
+    _LinkErrors: tuple[type[Exception], ...] = (serial.SerialException, OSError)
+else:
+    import termios
+
+    # pyserial lets termios.error (not an OSError) escape from a hung-up port
+    _LinkErrors = (serial.SerialException, OSError, termios.error)
 
 
 def _port_error(port: str, exc: Exception) -> SerialPortError:
@@ -131,8 +138,14 @@ class KheperaRobot:
     def open(
         cls, config: RobotConfig, clock: Clock, on_exchange: OnExchange | None = None
     ) -> KheperaRobot:
-        """Open ``config.port`` (:func:`open_serial`) and wrap it."""
-        return cls(open_serial(config), config, clock, on_exchange)
+        """Open ``config.port`` (:func:`open_serial`), discard stale input, and wrap it."""
+        port = open_serial(config)
+        try:
+            port.reset_input_buffer()
+        except _LinkErrors as exc:
+            port.close()
+            raise _port_error(config.port, exc) from None
+        return cls(port, config, clock, on_exchange)
 
     @property
     def config(self) -> RobotConfig:
@@ -222,6 +235,7 @@ class KheperaRobot:
         if self._disconnected:
             raise self._disconnect_error(text, "the port was lost earlier")
         attempts = cfg.retries + 1
+        failure: tuple[RobotTimeout | GarbledReply, str | None] | None = None
         for attempt in range(1, attempts + 1):
             t0_ns = self._clock.monotonic_ns()
             try:
@@ -249,13 +263,13 @@ class KheperaRobot:
             except (RobotTimeout, GarbledReply) as exc:
                 outcome = "timeout" if isinstance(exc, RobotTimeout) else "garbled"
                 self._report(t0_ns, text, reply_text, outcome, attempt, str(exc))
-                if attempt < attempts:
-                    self._resync(attempt)
-                    continue
-                raise self._final_error(exc, text, attempts, reply_text) from None
+                failure = (exc, reply_text)
+                self._resync(attempt)  # also after the last one: leave the line clean
+                continue
             self._report(t0_ns, text, reply_text, "ok", attempt, None)
             return reply
-        raise AssertionError("unreachable: the last attempt returns or raises")
+        assert failure is not None  # every attempt failed
+        raise self._final_error(failure[0], text, attempts, failure[1])
 
     def _final_error(
         self, exc: RobotTimeout | GarbledReply, text: str, attempts: int, reply_text: str | None

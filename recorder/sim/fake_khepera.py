@@ -145,9 +145,12 @@ class _Segment:
 
 
 def _garble(reply: bytes) -> bytes:
-    """Corrupt a reply the way a wrong baud rate does: high bits set, still ended by CR LF."""
+    """Corrupt a reply the way line noise does: high bits set, and stray bytes after the CR LF.
+
+    The stray bytes stay in the client's input buffer: only a resynchronisation removes them.
+    """
     body = reply.rstrip(b"\r\n")
-    return b"\xff" + bytes(b | 0x80 for b in body) + b"\r\n"
+    return b"\xff" + bytes(b | 0x80 for b in body) + b"\r\n\x80\xfe"
 
 
 class FakeKhepera:
@@ -325,19 +328,22 @@ class FakeKhepera:
         omega = (v_right - v_left) / cfg.wheel_base_m * turn_scale
         return float(v), float(omega)
 
-    def _start_move(self, now_ns: int, target: tuple[int, int]) -> None:
+    def _start_motion(
+        self,
+        now_ns: int,
+        rates_pps: tuple[float, float],
+        t1_ns: int | None,
+        target: tuple[int, int] | None,
+    ) -> None:
+        """New motion segment from the current state, with fresh actuation noise."""
         seg = self._segments[-1]
-        counters = seg.counters(now_ns)
-        deltas = (target[0] - counters[0], target[1] - counters[1])
-        duration_s = max(abs(d) for d in deltas) / (self._config.move_speed * 100.0)
-        rates = (deltas[0] / duration_s, deltas[1] / duration_s) if duration_s > 0 else (0.0, 0.0)
-        v, omega = self._true_rates(rates)
+        v, omega = self._true_rates(rates_pps)
         self._push(
             _Segment(
                 t0_ns=now_ns,
-                t1_ns=now_ns + round(duration_s * 1e9),
-                counters0=counters,
-                rates_pps=rates,
+                t1_ns=t1_ns,
+                counters0=seg.counters(now_ns),
+                rates_pps=rates_pps,
                 target=target,
                 pose0=seg.pose(now_ns),
                 v_m_s=v,
@@ -345,22 +351,17 @@ class FakeKhepera:
             )
         )
 
+    def _start_move(self, now_ns: int, target: tuple[int, int]) -> None:
+        """Position move (``C``): both wheels finish together at ``config.move_speed``."""
+        counters = self._segments[-1].counters(now_ns)
+        deltas = (target[0] - counters[0], target[1] - counters[1])
+        duration_s = max(abs(d) for d in deltas) / (self._config.move_speed * 100.0)
+        rates = (deltas[0] / duration_s, deltas[1] / duration_s) if duration_s > 0 else (0.0, 0.0)
+        self._start_motion(now_ns, rates, now_ns + round(duration_s * 1e9), target)
+
     def _start_speed(self, now_ns: int, speeds: tuple[int, int]) -> None:
-        seg = self._segments[-1]
-        rates = (speeds[0] * 100.0, speeds[1] * 100.0)
-        v, omega = self._true_rates(rates)
-        self._push(
-            _Segment(
-                t0_ns=now_ns,
-                t1_ns=None,
-                counters0=seg.counters(now_ns),
-                rates_pps=rates,
-                target=None,
-                pose0=seg.pose(now_ns),
-                v_m_s=v,
-                omega_rad_s=omega,
-            )
-        )
+        """Speed mode (``D``): wheels run at ``speeds`` pulses per 10 ms until changed."""
+        self._start_motion(now_ns, (speeds[0] * 100.0, speeds[1] * 100.0), None, None)
 
     def _set_counters(self, now_ns: int, values: tuple[int, int]) -> None:
         """Overwrite the counters; a move in progress keeps its remaining travel."""
@@ -384,7 +385,10 @@ class FakeKhepera:
         )
 
     def pose_world(self, t_ns: int | None = None) -> PoseWorld:
-        """True pose at clock time ``t_ns`` (default now), interpolated within a motion.
+        """True pose at time ``t_ns`` (default now), interpolated within a motion.
+
+        ``t_ns`` is in the time base of the clock given to the constructor (its
+        ``monotonic_ns``), e.g. the ``VirtualClock`` the recorder also sleeps on.
 
         Raises
         ------
