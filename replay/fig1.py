@@ -20,6 +20,9 @@ from replay.records import PRIORS
 #: Range window of the figure, FR units (movement length = 1).
 R_MIN, R_MAX = 0.1, 5.0
 WIDTH, HEIGHT = 320, 160
+#: Quadrature nodes over the cone for p(r) (the window is 2 eps wide: 64 is plenty, and
+#: numpy's Gauss-Legendre nodes cost O(n^3)).
+N_ANGLE = 64
 
 
 def log_fig1(rec: rr.RecordingStream, eps_rad: float, *, bearing_rad: float = 0.0) -> None:
@@ -33,7 +36,8 @@ def log_fig1(rec: rr.RecordingStream, eps_rad: float, *, bearing_rad: float = 0.
         scaled = np.sqrt(density / max(float(density.max()), 1e-300))
         heat = cv2.applyColorMap((255 * scaled).astype(np.uint8), cv2.COLORMAP_VIRIDIS)
         rec.log(f"fig1/density/{name}", rr.Image(heat, color_model="BGR"), static=True)
-        marginal = range_marginal(make_prior(name, eps_rad, R_MIN, R_MAX), r, bearing_rad)
+        prior = make_prior(name, eps_rad, R_MIN, R_MAX)
+        marginal = range_marginal(prior, r, bearing_rad, n_angle=N_ANGLE)
         rec.log(
             f"fig1/range/{name}",
             rr.BarChart(marginal, abscissa=r, widths=np.full(r.size, r[1] - r[0])),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -13,11 +14,20 @@ from replay.sinks.derived import DerivedLogSink
 from replay.sinks.summary import SummarySink
 from replay.stages import run_log
 
+_FLAT_LIST = re.compile(r"\[\s+([^\[\]{}]*?)\s+\]")
+
+
+def dumps(doc: dict[str, Any]) -> str:
+    """Indented JSON with innermost lists (coordinates, bearing pairs) kept on one line."""
+    return _FLAT_LIST.sub(
+        lambda m: "[" + " ".join(m.group(1).split()) + "]", json.dumps(doc, indent=1)
+    )
+
 
 def write_json(path: str | os.PathLike[str], doc: dict[str, Any]) -> None:
     """Write a JSON document (indented, trailing newline); one-line error if it cannot."""
     try:
-        Path(path).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        Path(path).write_text(dumps(doc) + "\n", encoding="utf-8")
     except OSError as exc:
         raise LogError(f"cannot write {os.fspath(path)}: {exc.strerror}") from None
 

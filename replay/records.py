@@ -9,15 +9,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.errors import EstimationError
 from data_schemas.session import Session
+from pipeline.priors import PriorName
 from replay.truth import Truth
 
-PRIORS = ("impartial", "gaussian", "mixture")
+PRIORS: tuple[PriorName, ...] = ("impartial", "gaussian", "mixture")
 
 
 @dataclass(frozen=True)
@@ -39,13 +41,22 @@ class MethodConfig:
     n_l: int = 300
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        if self.prior not in PRIORS:
+            raise EstimationError(f"unknown prior {self.prior!r}; use one of {', '.join(PRIORS)}")
+
+    @property
+    def prior_name(self) -> PriorName:
+        """The prior, typed for :mod:`pipeline`."""
+        return cast(PriorName, self.prior)
+
     def summary(self, vision_error_rad: float) -> dict[str, Any]:
         """The summary's ``method`` block."""
         return {
             "prior": self.prior,
             "n_r": self.n_r,
             "n_l": self.n_l,
-            "vision_error_deg": float(np.degrees(vision_error_rad)),
+            "vision_error_deg": round(float(np.degrees(vision_error_rad)), 9),
             "seed": self.seed,
         }
 

@@ -118,7 +118,7 @@ class Runner:
             self.session.landmark_names(),
             self.session.reference,
             vision_error_rad=self.session.vision_error_rad,
-            prior=method.prior,  # type: ignore[arg-type]
+            prior=method.prior_name,
             n_r=method.n_r,
             n_l=method.n_l,
             rng=np.random.default_rng(method.seed),

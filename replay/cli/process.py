@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 import sys
 from pathlib import Path
@@ -105,7 +104,7 @@ def process(
     from tqdm import tqdm
 
     from replay.batch import expand_logs, plan_jobs, run_jobs
-    from replay.process import process_log, result_line
+    from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
 
     show_skips()
@@ -114,7 +113,7 @@ def process(
     if len(paths) == 1 and scheduler is None:
         doc = process_log(paths[0], method, out=out, summary=summary)
         if out is None and summary is None:
-            click.echo(json.dumps(doc, indent=1))
+            click.echo(dumps(doc))
         else:
             click.echo(f"{paths[0]}: {result_line(doc)}")
         return
