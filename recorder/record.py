@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import signal
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -363,3 +364,38 @@ def _stop_after(rec: _Recorder, level: int, text: str) -> None:
             rec.log(level, text)
     with contextlib.suppress(BslamError):
         rec.robot.stop()
+
+
+def record_to_file(
+    out: str | os.PathLike[str],
+    session_doc: dict[str, Any],
+    *,
+    sink: CommandSink,
+    writer_options: dict[str, Any] | None = None,
+    **loop: Any,
+) -> RecordResult:
+    """Create the log, attach the robot's ``sink``, run :func:`record_session`, finish the log.
+
+    The one code path of ``bslam record`` and ``bslam simulate``. SIGINT/SIGTERM are handled
+    (see :func:`stop_on_signals`) from before the log exists until it is finished, so a stop
+    request always leaves an indexed file.
+
+    Parameters
+    ----------
+    out : path
+        Log to write.
+    session_doc : dict
+        Session document (:func:`recorder.session.build_session_doc`).
+    sink : CommandSink
+        The ``on_exchange`` the robot was opened with.
+    writer_options : dict, optional
+        Extra keyword arguments of :class:`LogWriter` (chunking, compression, fsync).
+    **loop
+        Keyword arguments of :func:`record_session` (``robot``, ``camera``, ``clock``, ...).
+    """
+    with (
+        stop_on_signals(),
+        LogWriter(out, session_doc, clock=loop["clock"], **(writer_options or {})) as writer,
+    ):
+        sink.attach(writer)
+        return record_session(writer=writer, **loop)

@@ -1,12 +1,18 @@
-"""Build the session document the recorder writes first into every log (``bslam.session``)."""
+"""The session document the recorder writes first into every log (``bslam.session``), and the
+calibration and landmark files ``bslam record`` reads to build it."""
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, Literal
 
-from data_schemas.calibration import Calibration
+from data_schemas.calibration import Calibration, calibration_from_dict
+from data_schemas.codec import validate
+from data_schemas.errors import BslamError, CalibrationError, SchemaError
 from data_schemas.session import SCHEMA_VERSION, LandmarkSpec, session_from_doc
 from recorder.writer import software_version
 
@@ -88,3 +94,55 @@ def build_session_doc(
         doc.update(extra)
     session_from_doc(doc)
     return doc
+
+
+def _read_json(path: str | os.PathLike[str], what: str) -> Any:
+    try:
+        with open(path, encoding="utf-8") as f:
+            return json.load(f)
+    except OSError as exc:
+        raise BslamError(f"cannot read {what} file {os.fspath(path)}: {exc.strerror}") from None
+    except json.JSONDecodeError as exc:
+        raise BslamError(f"{what} file {os.fspath(path)} is not valid JSON ({exc})") from None
+
+
+def load_calibration_file(path: str | os.PathLike[str]) -> Calibration:
+    """Read a camera calibration JSON file (``bslam.Calibration``); raise CalibrationError."""
+    doc = _read_json(path, "calibration")
+    try:
+        validate("bslam.Calibration", doc, what=f"calibration file {os.fspath(path)}")
+    except SchemaError as exc:
+        raise CalibrationError(str(exc)) from None
+    return calibration_from_dict(doc)
+
+
+@dataclass(frozen=True)
+class LandmarkCatalog:
+    """The landmark file of ``bslam record``: catalog, reference pair and vision error bound."""
+
+    landmarks: tuple[LandmarkSpec, ...]
+    reference: tuple[str, str]
+    vision_error_rad: float
+
+
+def load_landmark_file(path: str | os.PathLike[str]) -> LandmarkCatalog:
+    """Read a landmark file: ``{"landmarks": [{"name", "color"[, "hsv"]}], "reference": [a, b],
+    "vision_error_deg": eps}`` (the same keys as the session document); raise SchemaError."""
+    doc = _read_json(path, "landmark")
+    what = f"landmark file {os.fspath(path)}"
+    if not isinstance(doc, dict):
+        raise SchemaError(f"{what}: expected a JSON object with 'landmarks' and 'reference'")
+    unknown = sorted(set(doc) - {"landmarks", "reference", "vision_error_deg"})
+    if unknown:
+        raise SchemaError(f"{what}: unknown key {unknown[0]!r}")
+    probe = {
+        "schema_version": SCHEMA_VERSION,
+        "software_version": "",
+        "created_unix_ns": 0,
+        "simulated": False,
+        "robot": {"model": "-", "port": "-", "baudrate": 1, "mm_per_pulse": 1, "wheel_base_m": 1},
+        "camera": {"source": "-", "calibration": {"model": "unwrapped", "width": 1, "height": 1}},
+        "vision_error_deg": 3.0,
+    } | doc
+    session = session_from_doc(probe, what=what)
+    return LandmarkCatalog(session.landmarks, session.reference, session.vision_error_rad)

@@ -21,6 +21,9 @@ COMMANDS: dict[str, str] = {
     "replay": "replay.cli.replay_log:replay",
     "regress": "replay.cli.regress:regress",
     "experiment": "replay.cli.experiment:experiment",
+    "info": "replay.cli.info:info",
+    "recover": "replay.cli.recover:recover",
+    "record": "replay.cli.record:record",
 }
 
 

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import make_session_doc, sample_messages
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
@@ -16,6 +15,7 @@ from recorder.clock import VirtualClock
 from recorder.logread import LogReader, log_summary, recover_log
 from recorder.timebase import EpochClock
 from recorder.writer import LogWriter
+from tests.recorder.samples import make_session_doc, sample_messages
 
 
 def _finished_log(path: Path, frames: int = 30) -> None:

@@ -12,7 +12,6 @@ from typing import Any
 import cv2
 import numpy as np
 import pytest
-from conftest import make_session_doc
 
 from data_schemas.calibration import UnwrappedCalibration
 from data_schemas.codec import validate
@@ -35,6 +34,7 @@ from recorder.robot import KheperaRobot, RobotConfig, RobotDisconnected, RobotPr
 from recorder.sim.fake_khepera import FakeKhepera
 from recorder.timebase import EpochClock
 from recorder.writer import LogWriter
+from tests.recorder.samples import make_session_doc
 
 CAL = UnwrappedCalibration(32, 16)
 

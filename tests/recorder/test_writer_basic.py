@@ -10,7 +10,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import make_session_doc, sample_messages
 from mcap.reader import make_reader
 from mcap.records import Chunk, Header, Metadata
 from mcap.stream_reader import StreamReader
@@ -22,6 +21,7 @@ from recorder.clock import VirtualClock
 from recorder.logread import LogReader
 from recorder.timebase import EpochClock
 from recorder.writer import LogWriter
+from tests.recorder.samples import make_session_doc, sample_messages
 
 
 def _write_all(output: Any, n: int = 5) -> list[tuple[str, dict[str, Any]]]:

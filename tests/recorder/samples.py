@@ -1,4 +1,4 @@
-"""Fixtures for recorder tests: a valid session document and messages for every topic."""
+"""Test data for recorder tests: a valid session document and one message for every topic."""
 
 from __future__ import annotations
 
@@ -8,7 +8,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-import pytest
 
 from data_schemas.calibration import UnwrappedCalibration
 from data_schemas.session import LandmarkSpec
@@ -79,8 +78,3 @@ def sample_messages(t_ns: int, rng: np.random.Generator) -> dict[str, dict[str, 
         },
         "/sim/ground_truth": {"timestamp": stamp, "x": 0.1, "y": 0.2, "heading": -1.0},
     }
-
-
-@pytest.fixture
-def session_doc() -> dict[str, Any]:
-    return make_session_doc()
