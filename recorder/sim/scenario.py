@@ -51,8 +51,9 @@ DEFAULT_LANDMARK_RADIUS_M = 0.01
 DEFAULT_LANDMARK_HEIGHT_M = 0.15
 DEFAULT_ROBOT_RADIUS_M = 0.03
 DEFAULT_PIXEL_NOISE = 2.0
-#: Straight paths keep the robot's edge this far from a landmark's surface (m).
-LANDMARK_CLEARANCE_M = 0.03
+#: Moves keep the robot's edge this far from walls and landmark surfaces (m): room for
+#: actuation noise.
+CLEARANCE_M = 0.04
 
 BUILTIN_SCENARIOS: tuple[str, ...] = ("paper", "paper_omni")
 
@@ -377,8 +378,8 @@ def _check_explicit_moves(scenario: Scenario, fail: Any) -> None:
             (x, y, h),
             m.turn_rad,
             m.distance_m,
-            margin_m=scenario.robot_radius_m,
-            clearance_m=LANDMARK_CLEARANCE_M,
+            robot_radius_m=scenario.robot_radius_m,
+            clearance_m=CLEARANCE_M,
         )
         if problem is not None:
             raise fail(

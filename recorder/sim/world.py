@@ -146,7 +146,7 @@ class SimWorld:
         turn_rad: float,
         distance_m: float,
         *,
-        margin_m: float,
+        robot_radius_m: float,
         clearance_m: float,
     ) -> str | None:
         """Why a move (turn in place, then drive straight) is unsafe, or None if it is fine.
@@ -157,24 +157,26 @@ class SimWorld:
             Pose before the move (world frame, m, rad).
         turn_rad, distance_m : float
             The move.
-        margin_m : float
-            The end point must lie at least this far inside every wall (robot radius).
+        robot_radius_m : float
+            Radius of the robot's footprint.
         clearance_m : float
-            The straight path must keep the robot's edge this far from every cylinder's
-            surface (or, if the robot starts closer, never bring it closer than it was).
+            Gap kept between the robot's edge and the walls (at the end point) and every
+            cylinder's surface (along the path; if the robot starts closer, the path must not
+            bring it closer than it was). It absorbs actuation noise.
 
         Returns
         -------
         str or None
-            A short reason (no trailing period), e.g. ``"would end at (1.10, 0.30), outside
-            the arena"``.
+            A short reason, e.g. ``"would end at (1.100, 0.300) m, less than 0.070 m from a
+            wall of the 1.05 x 0.68 m arena"``.
         """
         x0, y0, heading = pose_world
         h = heading + turn_rad
         x1, y1 = x0 + distance_m * math.cos(h), y0 + distance_m * math.sin(h)
-        if not self.arena.contains(x1, y1, margin_m):
+        margin = robot_radius_m + clearance_m
+        if not self.arena.contains(x1, y1, margin):
             return (
-                f"would end at ({x1:.3f}, {y1:.3f}) m, less than {margin_m:.3f} m from a wall "
+                f"would end at ({x1:.3f}, {y1:.3f}) m, less than {margin:.3f} m from a wall "
                 f"of the {self.arena.width_m:g} x {self.arena.height_m:g} m arena"
             )
         if not self.landmarks:
@@ -185,7 +187,7 @@ class SimWorld:
         t = np.clip(rel @ seg / max(float(seg @ seg), 1e-18), 0.0, 1.0)
         closest = np.hypot(*(rel - t[:, None] * seg).T)
         start = np.hypot(rel[:, 0], rel[:, 1])
-        required = np.minimum(self.radius_m + margin_m + clearance_m, start)
+        required = np.minimum(self.radius_m + margin, start)
         bad = np.flatnonzero(closest < required - 1e-12)
         if bad.size:
             lm = self.landmarks[int(bad[0])]
