@@ -107,7 +107,8 @@ def profile_blobs(
         run_id = np.cumsum(is_start) - 1  # runs numbered by their start
         run_id[run_id < 0] = ends.size - 1  # bins before the first start close the last run
         widths = np.empty(ends.size, np.intp)
-        widths[run_id[starts]] = (occupied[ends] - occupied[starts]) % n_bins + 1
+        run_end = occupied[np.roll(ends, -1)]  # the run starting at starts[r] ends at ends[r+1]
+        widths[run_id[starts]] = (run_end - occupied[starts]) % n_bins + 1
     n_runs = widths.size
     n_px = np.bincount(run_id, weights=profile.counts[occupied], minlength=n_runs)
     largest = int(n_px.max())
@@ -125,6 +126,27 @@ def profile_blobs(
         for r in keep[np.argsort(-n_px[keep], kind="stable")]
     ]
     return blobs, largest
+
+
+def is_fringe(
+    blob: Blob, others: list[Blob], *, max_width_rad: float, bin_width_rad: float
+) -> bool:
+    """True if ``blob`` looks like a mixed-colour fringe of one of ``others`` (other classes).
+
+    Where two landmarks of different colours meet (one partly behind the other), anti-aliased
+    pixels mix their colours (red + green looks yellow): a sliver at most ``max_width_rad``
+    wide that shares bins with a blob of another class with at least as many pixels. Such a
+    sliver is not a landmark. Merely adjacent blobs are kept (a thin landmark may stand beside
+    another), but a partly hidden landmark whose visible part is such a sliver is dropped.
+    """
+    if blob.width_rad > max_width_rad * (1.0 + 1e-9):
+        return False
+    for other in others:
+        reach = 0.5 * (blob.width_rad + other.width_rad) - 0.5 * bin_width_rad
+        gap = abs(wrap_rad(blob.bearing_rad - other.bearing_rad))
+        if other.n_pixels >= blob.n_pixels and gap <= reach:
+            return True
+    return False
 
 
 def component_blobs(

@@ -48,13 +48,20 @@ class Detection:
 
 
 def detection_from_blobs(
-    name: str, blobs: list[Blob], largest: int, *, min_pixels: int
+    name: str, blobs: list[Blob], largest: int, *, min_pixels: int, n_fringes: int = 0
 ) -> Detection:
-    """Report for landmark ``name`` from its blobs (>= ``min_pixels``, largest first)."""
+    """Report for landmark ``name`` from its blobs (>= ``min_pixels``, largest first).
+
+    ``largest`` is the pixel count of the largest run of its colour (any size); ``n_fringes``
+    counts blobs already dropped as mixed-colour fringes of other landmarks.
+    """
     if not blobs:
-        reason = (
-            f"too few pixels ({largest} < {min_pixels})" if largest else "no pixels of its colour"
-        )
+        if n_fringes:
+            reason = f"only {n_fringes} mixed-colour fringe(s) beside other landmarks"
+        elif largest:
+            reason = f"too few pixels ({largest} < {min_pixels})"
+        else:
+            reason = "no pixels of its colour"
         return Detection(name, False, None, 0.0, 0.0, largest, 0, reason)
     top = blobs[0]
     second = blobs[1] if len(blobs) > 1 else None

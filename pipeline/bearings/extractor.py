@@ -11,7 +11,13 @@ from numpy.typing import NDArray
 from data_schemas.calibration import Calibration
 from data_schemas.errors import ImageError
 from data_schemas.session import LandmarkSpec
-from pipeline.bearings.blobs import Blob, component_blobs, profile_blobs, profile_of_mask
+from pipeline.bearings.blobs import (
+    Blob,
+    component_blobs,
+    is_fringe,
+    profile_blobs,
+    profile_of_mask,
+)
 from pipeline.bearings.classify import ColorClassifier
 from pipeline.bearings.color_classes import LandmarkCatalogError, hsv_box_for
 from pipeline.bearings.detection import Detection, detection_from_blobs
@@ -64,8 +70,9 @@ class BearingExtractor:
     method : {"profile", "components"}
         Blobs as runs of the angular profile (column sums / ring sums, fast) or as 8-connected
         components (slower; separates blobs stacked in the same bearings).
-    max_gap_bins : int
-        Profile runs this close (empty bins between them) are one blob.
+    max_gap_bins : int, optional
+        Profile runs this close (empty bins between them) are one blob; default one column
+        (unwrapped) or one pixel's span at ``r_min`` (omni).
 
     Raises
     ------
@@ -80,7 +87,7 @@ class BearingExtractor:
         *,
         min_pixels: int | None = None,
         method: Method = "profile",
-        max_gap_bins: int = 1,
+        max_gap_bins: int | None = None,
     ) -> None:
         names = [spec.name for spec in catalog]
         if len(set(names)) != len(names):
@@ -90,13 +97,14 @@ class BearingExtractor:
         self.calibration = calibration
         self.names = names
         self.method = method
-        self.max_gap_bins = max_gap_bins
         area_ratio = calibration.width * calibration.height / (176 * 255)
         self.min_pixels = (
             max(3, round(MIN_PIXELS_176X255 * area_ratio)) if min_pixels is None else min_pixels
         )
         self._layout = make_layout(calibration)
-        self._classifier = ColorClassifier([hsv_box_for(spec) for spec in catalog])
+        self.max_gap_bins = self._layout.gap_bins if max_gap_bins is None else max_gap_bins
+        self._boxes = [hsv_box_for(spec) for spec in catalog]
+        self._classifier = ColorClassifier(self._boxes)
 
     def extract(self, image_bgr: NDArray[np.uint8]) -> dict[str, Detection]:
         """Detections of every catalog landmark in one BGR frame, keyed by name."""
@@ -154,11 +162,25 @@ class BearingExtractor:
         return self._classifier.classify(stack, valid)
 
     def _detect(self, planes: list[NDArray[np.uint8]]) -> dict[str, Detection]:
+        slots = self._classifier.slots
+        found = [
+            self._blobs(np.bitwise_and(planes[slot.plane], np.uint8(slot.bit)), slot.bit)
+            for slot in slots
+        ]
+        fringe = {
+            "max_width_rad": self._layout.fringe_width_rad,
+            "bin_width_rad": self._layout.bin_width_rad,
+        }
         out = {}
-        for name, slot in zip(self.names, self._classifier.slots, strict=True):
-            mask = np.bitwise_and(planes[slot.plane], np.uint8(slot.bit))
-            blobs, largest = self._blobs(mask, slot.bit)
-            out[name] = detection_from_blobs(name, blobs, largest, min_pixels=self.min_pixels)
+        for k, name in enumerate(self.names):
+            blobs, largest = found[k]
+            others = [
+                b for j, (bj, _) in enumerate(found) if self._boxes[j] != self._boxes[k] for b in bj
+            ]
+            kept = [b for b in blobs if not is_fringe(b, others, **fringe)]
+            out[name] = detection_from_blobs(
+                name, kept, largest, min_pixels=self.min_pixels, n_fringes=len(blobs) - len(kept)
+            )
         return out
 
     def _blobs(self, mask: NDArray[np.uint8], value: int) -> tuple[list[Blob], int]:

@@ -37,6 +37,16 @@ class UnwrappedLayout:
         """Angular size of one bin (one column)."""
         return TWO_PI / self.calibration.width
 
+    @property
+    def gap_bins(self) -> int:
+        """Default gap (empty bins) bridged inside one blob: one column of noise dropout."""
+        return 1
+
+    @property
+    def fringe_width_rad(self) -> float:
+        """Widest mixed-colour fringe: two columns."""
+        return 2.0 * self.bin_width_rad
+
 
 @dataclass(frozen=True, eq=False)
 class OmniLayout:
@@ -53,8 +63,8 @@ class OmniLayout:
     pixel_cos, pixel_sin : ndarray, crop shape, float64
         Cosine and sine of each pixel centre's bearing.
     n_bins : int
-        Number of sectors: about one pixel wide at ``r_min`` (90..ceil(2 pi r_max)), so a blob
-        that spans the ring's depth leaves no empty sector.
+        Number of sectors: one pixel wide at ``r_max`` (at least 90). Nearer the centre a pixel
+        spans several sectors, so runs bridge gaps of up to ``gap_bins`` empty sectors.
     """
 
     calibration: OmniCalibration
@@ -69,6 +79,18 @@ class OmniLayout:
     def bin_width_rad(self) -> float:
         """Angular size of one sector."""
         return TWO_PI / self.n_bins
+
+    @property
+    def gap_bins(self) -> int:
+        """Default gap (empty sectors) bridged inside one blob: a pixel's span at ``r_min``."""
+        cal = self.calibration
+        return max(1, math.ceil(cal.r_max / max(cal.r_min, 1.0)))
+
+    @property
+    def fringe_width_rad(self) -> float:
+        """Widest mixed-colour fringe: two pixels at the ring's mid radius."""
+        cal = self.calibration
+        return 2.0 / max(0.5 * (cal.r_min + cal.r_max), 1.0)
 
 
 Layout = UnwrappedLayout | OmniLayout
@@ -89,7 +111,7 @@ def make_layout(calibration: Calibration) -> Layout:
     radius = np.hypot(xc - cal.cx, yc - cal.cy)
     inside = (radius >= cal.r_min) & (radius <= cal.r_max)
     bearing = cal.bearing_of_pixel(xc, yc)
-    n_bins = min(max(90, math.floor(TWO_PI * cal.r_min)), max(90, math.ceil(TWO_PI * cal.r_max)))
+    n_bins = max(90, math.ceil(TWO_PI * cal.r_max))
     sector = np.floor((bearing + math.pi) * (n_bins / TWO_PI)).astype(np.int32) % n_bins
     return OmniLayout(
         calibration=cal,
