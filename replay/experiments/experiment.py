@@ -148,7 +148,7 @@ def render_paper(results: Results, out_dir: Path) -> dict[str, str]:
 def fig1(results: Results, path: Path) -> Path:
     """The three priors of one bearing (eps of the experiment), as in the paper's Fig. 1."""
     from pipeline.priors import make_prior, prior_density_grid, range_marginal
-    from replay.fig1 import R_MAX, R_MIN
+    from replay.fig1 import N_ANGLE, R_MAX, R_MIN
 
     eps_rad = math.radians(float(results.config["scenario"]["vision_error_deg"]))
     half = R_MAX * math.tan(1.6 * eps_rad)
@@ -158,7 +158,8 @@ def fig1(results: Results, path: Path) -> Path:
     densities, marginals = {}, {}
     for name in ("impartial", "gaussian", "mixture"):
         densities[name] = prior_density_grid(name, 0.0, eps_rad, R_MIN, R_MAX, xs, ys)
-        marginals[name] = range_marginal(make_prior(name, eps_rad, R_MIN, R_MAX), r)
+        prior = make_prior(name, eps_rad, R_MIN, R_MAX)
+        marginals[name] = range_marginal(prior, r, n_angle=N_ANGLE)
     return plots.fig1_priors(xs, ys, densities, r, marginals, path)
 
 

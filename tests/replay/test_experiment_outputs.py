@@ -33,6 +33,7 @@ def synthetic(runs: int = 12, movements: int = 5) -> Results:
         "protocol": proto.to_dict(),
         "scored_landmarks": ["L3", "L4"],
         "methods": METHODS,
+        "scenario": {"vision_error_deg": 3.0},
         "geometry": {
             "arena_cm": [105.0, 68.0],
             "baseline_cm": 30.0,
@@ -143,7 +144,8 @@ def test_figures_rrd_and_report(tmp_path: Path) -> None:
     write_rrd(res, tmp_path / "experiment.rrd")
     chunks = list(rr.chunk.RrdReader(tmp_path / "experiment.rrd").stream())
     entities = {c.entity_path for c in chunks}
-    assert {"/fig7/L3/mean", "/fig8/mean", "/comparison/crb", "/calibration/impartial"} <= entities
+    expected_entities = {"/fig7/L3/mean", "/fig8/mean", "/comparison/crb", "/calibration/impartial"}
+    assert expected_entities | {"/fig1/range/impartial"} <= entities
     expected = movement_curve(res.rows, method="impartial", n_l=300, landmarks=["L3"])
     got: dict[int, float] = {}
     for c in chunks:
