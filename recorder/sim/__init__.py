@@ -1,1 +1,4 @@
-"""The simulated world: scenarios, arena geometry, movement planner, renderer, fake devices."""
+"""Simulated world: scenarios, arena geometry, movement planner, renderer, fake robot and camera.
+
+They let the recorder run without hardware.
+"""

@@ -278,10 +278,17 @@ def _box_spline_cdf(
     """
     s = np.clip(d, -(a + b), a + b) + a + b
     acc = np.zeros_like(s)
+    t = np.empty_like(s)
     for i, ci in ((0, 1.0), (1, -2.0), (2, 1.0)):
         for k, ck in ((0, 1.0), (1, -2.0), (2, 1.0)):
-            acc += ci * ck * np.maximum(s - i * a - k * b, 0.0) ** 4
-    out: NDArray[np.float64] = np.clip(acc / (24.0 * a * a * b * b), 0.0, 1.0)
+            np.subtract(s, i * a + k * b, out=t)
+            np.maximum(t, 0.0, out=t)
+            t *= t
+            t *= t
+            t *= ci * ck
+            acc += t
+    acc /= 24.0 * a * a * b * b
+    out: NDArray[np.float64] = np.clip(acc, 0.0, 1.0, out=acc)
     return out
 
 

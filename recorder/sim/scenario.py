@@ -329,12 +329,19 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
         float(start[1]),
         math.radians(float(start[2])) if len(start) > 2 else 0.0,
     )
-    if not arena.contains(start_world[0], start_world[1]):
+    if not arena.contains(start_world[0], start_world[1], robot_radius):
         raise fail(
             "trajectory.start",
             f"({start_world[0]:g}, {start_world[1]:g}) m is outside the "
-            f"{arena.width_m:g} x {arena.height_m:g} m arena",
+            f"{arena.width_m:g} x {arena.height_m:g} m arena (or closer to a wall than the "
+            f"robot radius {robot_radius:g} m)",
         )
+    for lm in landmarks:
+        if math.hypot(lm.x - start_world[0], lm.y - start_world[1]) < lm.radius_m + robot_radius:
+            raise fail(
+                "trajectory.start",
+                f"({start_world[0]:g}, {start_world[1]:g}) m puts the robot on landmark {lm.name}",
+            )
     seed = int(t.get("seed", 0))
     if isinstance(t["moves"], int):
         if "distance" not in t:

@@ -84,10 +84,14 @@ def render_one(
     return circular_centroid(alpha, pixel_bearings(cal)), frame.truth[0].bearing_drawn_rad, alpha
 
 
-@pytest.mark.parametrize("cal", CALIBRATIONS, ids=["unwrapped", "omni"])
-def test_centroid_matches_drawn_bearing(cal: Calibration) -> None:
+@pytest.mark.parametrize(
+    ("cal", "n_poses"),
+    [(CALIBRATIONS[0], 12), (CALIBRATIONS[1], 12), (UnwrappedCalibration(1920, 960), 2)],
+    ids=["unwrapped", "omni", "unwrapped-1920x960"],
+)
+def test_centroid_matches_drawn_bearing(cal: Calibration, n_poses: int) -> None:
     rng = np.random.default_rng(3)
-    for _ in range(12):
+    for _ in range(n_poses):
         lx, ly = rng.uniform(0.1, 0.95), rng.uniform(0.1, 0.6)
         dist, direction = rng.uniform(0.08, 0.9), rng.uniform(-math.pi, math.pi)
         pose = (

@@ -140,6 +140,7 @@ CASES: list[tuple[str, Edit, list[str]]] = [
     ("duplicate name", _set("landmarks.1.name", "L1"), ["'landmarks[1].name'", "duplicate"]),
     ("unknown reference", _set("reference", ["L1", "L9"]), ["'reference'", "'L9'"]),
     ("same reference", _set("reference", ["L1", "L1"]), ["'reference'", "differ"]),
+    ("start on a landmark", _set("trajectory.start", [0.21, 0.2]), ["'trajectory.start'", "L3"]),
     ("start outside", _set("trajectory.start", [1.3, 0.2]), ["'trajectory.start'", "outside"]),
     (
         "inverted range",
