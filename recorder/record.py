@@ -28,7 +28,7 @@ import signal
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from types import FrameType
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -47,6 +47,16 @@ LOG_NAME = "bslam.recorder"
 
 #: A callable returning the true pose ``(x, y, heading)`` (m, rad, world frame) right now.
 GroundTruth = Callable[[], Sequence[float]]
+
+
+class MoveLike(Protocol):
+    """What the loop needs of a move (``Move`` here, or the simulator's planned moves)."""
+
+    @property
+    def turn_rad(self) -> float: ...
+
+    @property
+    def distance_m(self) -> float: ...
 
 
 @dataclass(frozen=True)
@@ -235,7 +245,7 @@ class _Recorder:
         if self.last_frame_ns is None or now - self.last_frame_ns >= self.frame_period_ns:
             self.frame()
 
-    def keyframe(self, index: int, phase: str, move: Move) -> None:
+    def keyframe(self, index: int, phase: str, move: MoveLike) -> None:
         """At rest: keyframe, odometry, and the movement message pointing at the keyframe."""
         self.robot.stop()
         t_key = self.frame()
@@ -270,7 +280,7 @@ def record_session(
     camera: Camera,
     writer: LogWriter,
     clock: Clock,
-    moves: Iterable[Move],
+    moves: Iterable[MoveLike],
     frame_rate_hz: float = 5.0,
     encoding: Encoding = "png",
     png_level: int = 1,

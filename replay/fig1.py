@@ -30,7 +30,8 @@ def log_fig1(rec: rr.RecordingStream, eps_rad: float, *, bearing_rad: float = 0.
     half = R_MAX * math.tan(1.6 * eps_rad)
     xs = np.linspace(0.0, R_MAX, WIDTH)
     ys = np.linspace(half, -half, HEIGHT)  # image row 0 is the top: +y
-    r = np.linspace(R_MIN, R_MAX, 60)
+    edges = np.linspace(R_MIN, R_MAX, 61)
+    r = 0.5 * (edges[1:] + edges[:-1])  # bin centres (the support's ends would halve p(r))
     for name in PRIORS:
         density = prior_density_grid(name, bearing_rad, eps_rad, R_MIN, R_MAX, xs, ys)
         scaled = np.sqrt(density / max(float(density.max()), 1e-300))

@@ -58,14 +58,18 @@ def replay_log(
     rec: rr.RecordingStream,
     *,
     images: bool = True,
+    out: str | os.PathLike[str] | None = None,
     summary: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
-    """Stream every stage of ``log`` to ``rec`` (plus Fig. 1); return the summary document."""
+    """Stream every stage of ``log`` to ``rec`` (plus Fig. 1); return the summary document.
+
+    ``out`` and ``summary``, if given, also receive the derived log and the summary JSON.
+    """
     with ProcessableLog(log) as opened:
         eps_rad = opened.session.vision_error_rad
     log_fig1(rec, eps_rad)
-    doc = process_log(log, method, summary=summary, extra_sinks=(RerunSink(rec, images=images),))
-    return doc
+    sink = RerunSink(rec, images=images)
+    return process_log(log, method, out=out, summary=summary, extra_sinks=(sink,))
 
 
 def save_rrd(

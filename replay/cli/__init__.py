@@ -17,13 +17,15 @@ from data_schemas.errors import BslamError
 
 #: command name -> "module:attribute". Add a command by adding a line here.
 COMMANDS: dict[str, str] = {
-    "process": "replay.cli.process:process",
-    "replay": "replay.cli.replay_log:replay",
-    "regress": "replay.cli.regress:regress",
-    "experiment": "replay.cli.experiment:experiment",
     "info": "replay.cli.info:info",
     "recover": "replay.cli.recover:recover",
     "record": "replay.cli.record:record",
+    "simulate": "replay.cli.simulate:simulate",
+    "process": "replay.cli.process:process",
+    "replay": "replay.cli.replay_log:replay",
+    "regress": "replay.cli.regress:regress",
+    "demo": "replay.cli.demo:demo",
+    "experiment": "replay.cli.experiment:experiment",
 }
 
 

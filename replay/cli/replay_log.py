@@ -38,6 +38,7 @@ def replay(
 
     Without a target option it saves LOG's name with .rrd in the current folder.
     """
+    from replay.logs import ProcessableLog
     from replay.process import result_line
     from replay.records import MethodConfig
     from replay.rerun_out import RerunTarget, open_recording, replay_log
@@ -55,6 +56,7 @@ def replay(
     target = RerunTarget(chosen[0] if chosen else "save", where)  # type: ignore[arg-type]
     show_skips()
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
+    ProcessableLog(log).close()  # a bad log fails here, before any output exists
     rec, url = open_recording(log.stem, target)
     try:
         doc = replay_log(log, method, rec, images=not keyframes_only)

@@ -78,7 +78,7 @@ def render(x: float, y: float, heading: float, hidden: tuple[str, ...] = ()) -> 
         bearing = math.atan2(ly - y, lx - x) - heading
         u = float(cal.column_of_bearing(bearing))
         for du in (-2, -1, 0, 1, 2):
-            image[5:-5, int(math.floor(u + du)) % WIDTH] = NOMINAL_BGR[color]
+            image[5:-5, math.floor(u + du) % WIDTH] = NOMINAL_BGR[color]
     return image
 
 
