@@ -82,7 +82,8 @@ class LogWriter:
     chunk_seconds : float
         Close a chunk once its oldest message is this old (real seconds); at most 1.
     compression : {"zstd", "lz4", "none"}
-        Chunk compression. Frames are PNG already; zstd mostly wins back base64's third.
+        Chunk compression. Frames are PNG already: zstd only wins back base64's overhead
+        (about a quarter) and costs more than encoding the PNG, so the default is none.
     fsync : bool
         ``os.fsync`` after every closed chunk (ignored for streams without a file number).
 
@@ -100,7 +101,7 @@ class LogWriter:
         clock: Clock,
         chunk_bytes: int = 4 * 1024 * 1024,
         chunk_seconds: float = 0.5,
-        compression: Compression = "zstd",
+        compression: Compression = "none",
         fsync: bool = True,
     ) -> None:
         if not 0 < chunk_seconds <= 1.0:
@@ -182,7 +183,7 @@ class LogWriter:
         """
         schema_name = self._schema_for(topic_name, schema)
         validate(schema_name, msg, what=topic_name)
-        data = json.dumps(msg, separators=(",", ":")).encode()
+        data = _json_bytes(msg)
         stamp = msg.get("timestamp")
         with self._lock:
             self._check_usable()
@@ -196,11 +197,14 @@ class LogWriter:
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
-            if (
+            full = (
                 self._pending_bytes >= self._chunk_bytes
                 or now - self._pending_since >= self._chunk_seconds
-            ):
+            )
+            if full:
                 self._commit()
+        if full:
+            self._sync()
         return log_time
 
     def flush(self) -> None:
@@ -357,6 +361,46 @@ class LogWriter:
             self._stream.close()
         with contextlib.suppress(OSError):
             os.truncate(self._path, self._good_offset)
+
+
+#: String fields longer than this are spliced into the JSON text instead of re-encoded.
+_SPLICE_CHARS = 1 << 16
+
+
+def _json_bytes(msg: dict[str, Any]) -> bytes:
+    """Compact JSON of ``msg``; long plain-ASCII strings (base64 frames) are copied verbatim.
+
+    ``json.dumps`` scans every character of a multi-megabyte base64 string for escapes; a
+    string of printable ASCII without quotes or backslashes encodes as itself, so it is
+    checked with one ``bytes.translate`` pass and spliced in.
+    """
+    plain: dict[str, bytes] = {}
+    for key, value in msg.items():
+        if isinstance(value, str) and len(value) > _SPLICE_CHARS:
+            raw = _plain_ascii(value)
+            if raw is not None:
+                plain[key] = raw
+    if not plain:
+        return json.dumps(msg, separators=(",", ":")).encode()
+    head = {k: v for k, v in msg.items() if k not in plain}
+    parts = [json.dumps(head, separators=(",", ":")).encode()[:-1]]
+    for i, (key, raw) in enumerate(plain.items()):
+        sep = b"," if head or i > 0 else b""
+        parts.append(sep + json.dumps(key).encode() + b':"' + raw + b'"')
+    parts.append(b"}")
+    return b"".join(parts)
+
+
+#: Bytes JSON writes as themselves inside a string.
+_JSON_PLAIN = bytes(c for c in range(0x20, 0x7F) if c not in b'"\\')
+
+
+def _plain_ascii(text: str) -> bytes | None:
+    """``text`` as ASCII bytes if JSON encodes it as itself between quotes, else None."""
+    if not text.isascii():
+        return None
+    raw = text.encode("ascii")
+    return None if raw.translate(None, _JSON_PLAIN) else raw
 
 
 def _fileno(stream: IO[bytes]) -> int | None:

@@ -20,7 +20,7 @@ from data_schemas.registry import SESSION_METADATA_NAME, TOPICS
 from recorder.clock import VirtualClock
 from recorder.logread import LogReader
 from recorder.timebase import EpochClock
-from recorder.writer import LogWriter
+from recorder.writer import LogWriter, _json_bytes
 from tests.recorder.samples import make_session_doc, sample_messages
 
 
@@ -190,3 +190,19 @@ def test_old_chunk_reaches_the_file_without_further_writes(tmp_path: Path) -> No
         assert log.committed_count == 1
     finally:
         log.finish()
+
+
+@pytest.mark.parametrize(
+    "long_text",
+    [
+        "QUJD" * 40_000,
+        'quote " inside' * 10_000,
+        "tab\there" * 20_000,
+        "é" * 70_000,
+        "a\\b" * 30_000,
+    ],
+)
+def test_json_of_long_strings_is_exact(long_text: str) -> None:
+    msg = {"timestamp": {"sec": 1, "nsec": 2}, "data": long_text, "format": "png"}
+    assert json.loads(_json_bytes(msg)) == msg
+    assert json.loads(_json_bytes({"data": long_text})) == {"data": long_text}
