@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "replay": "replay.cli.replay_log:replay",
     "regress": "replay.cli.regress:regress",
     "demo": "replay.cli.demo:demo",
+    "experiment": "replay.cli.experiment:experiment",
 }
 
 
