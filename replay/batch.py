@@ -1,19 +1,19 @@
-"""Many logs at once: expand folders and globs, spread the logs over processes or a Dask cluster.
+"""Many logs at once: expand folders and globs into logs, plan one job per log.
 
-One log that fails (not MCAP, unfinished, ...) is reported as a failed :class:`LogOutcome` and
-does not stop the others. The same picklable job function runs in-process, in a local process
-pool (``workers > 1``) or on a Dask cluster (``scheduler`` address).
+:func:`process_job` is the picklable per-log function that :func:`replay.parallel.run_tasks`
+runs in process, on a local process pool or on a Dask cluster; a log that fails (not MCAP,
+unfinished, ...) becomes a failed outcome there and does not stop the others.
 """
 
 from __future__ import annotations
 
 import glob
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from data_schemas.errors import BslamError, LogError
+from data_schemas.errors import LogError
 from replay.records import MethodConfig
 
 DERIVED_SUFFIX = ".derived.mcap"
@@ -32,16 +32,6 @@ class LogJob:
     out: Path | None
     summary: Path | None
     method: MethodConfig
-
-
-@dataclass(frozen=True)
-class LogOutcome:
-    """What processing one log gave: a one-line result or a one-line error."""
-
-    log: Path
-    ok: bool
-    message: str
-    summary: dict[str, object] | None = None
 
 
 def expand_logs(args: Sequence[str]) -> list[Path]:
@@ -93,70 +83,8 @@ def plan_jobs(
     ]
 
 
-def run_job(job: LogJob) -> LogOutcome:
-    """Process one log; a user error becomes a failed outcome (picklable, for pools)."""
-    from replay.process import process_log, result_line
+def process_job(job: LogJob) -> dict[str, Any]:
+    """Process one log; return its summary document (a module-level function, for pools)."""
+    from replay.process import process_log
 
-    try:
-        doc = process_log(job.log, job.method, out=job.out, summary=job.summary)
-    except BslamError as exc:
-        return LogOutcome(job.log, False, str(exc))
-    return LogOutcome(job.log, True, result_line(doc), doc)
-
-
-def run_jobs(
-    jobs: Sequence[LogJob],
-    *,
-    workers: int = 1,
-    scheduler: str | None = None,
-    job_fn: Callable[[LogJob], LogOutcome] = run_job,
-    connect_timeout: str = "10s",
-) -> Iterator[LogOutcome]:
-    """Run jobs and yield outcomes as they complete.
-
-    Parameters
-    ----------
-    jobs : sequence of LogJob
-    workers : int
-        Local processes; 1 runs in this process.
-    scheduler : str, optional
-        Address of a Dask scheduler (``tcp://host:8786``); overrides ``workers``.
-    job_fn : callable
-        The per-log function (a module-level function, so that it pickles).
-    connect_timeout : str
-        How long to try reaching the Dask scheduler (Dask duration, e.g. ``"10s"``).
-    """
-    if scheduler is not None:
-        yield from _run_dask(jobs, scheduler, job_fn, connect_timeout)
-    elif workers <= 1 or len(jobs) == 1:
-        for job in jobs:
-            yield job_fn(job)
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(job_fn, job) for job in jobs]
-            for future in as_completed(futures):
-                yield future.result()
-
-
-class SchedulerError(BslamError):
-    """The Dask scheduler cannot be reached."""
-
-
-def _run_dask(
-    jobs: Sequence[LogJob],
-    scheduler: str,
-    job_fn: Callable[[LogJob], LogOutcome],
-    connect_timeout: str,
-) -> Iterator[LogOutcome]:
-    from distributed import Client
-    from distributed import as_completed as dask_as_completed
-
-    try:
-        client = Client(scheduler, timeout=connect_timeout)  # type: ignore[no-untyped-call]
-    except (OSError, TimeoutError) as exc:
-        raise SchedulerError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
-    with client:
-        futures = client.map(job_fn, list(jobs), pure=False)
-        for future in dask_as_completed(futures):  # type: ignore[no-untyped-call]
-            outcome: LogOutcome = future.result()
-            yield outcome
+    return process_log(job.log, job.method, out=job.out, summary=job.summary)

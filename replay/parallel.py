@@ -1,9 +1,12 @@
 """Run one function over many tasks: in process, on a local process pool, or on a Dask cluster.
 
-Every task runs guarded: an exception becomes a failed :class:`Outcome` with a one-line reason,
-so one bad task never sinks the others. A tqdm bar on stderr shows progress. Worker processes
-live for the whole map (one per worker), so modules imported once are reused by every task; on
-Linux the pool forks, and whatever the caller imported before the call is already loaded.
+The one runner of ``bslam process`` (many logs) and ``bslam experiment`` (many runs). Every
+task runs guarded: an exception becomes a failed :class:`Outcome` with a one-line reason, so one
+bad task never sinks the others. A tqdm bar on stderr shows progress, and ``on_outcome`` sees
+each outcome as it completes (e.g. to print a line per task above the bar with
+``tqdm.write``). Worker processes live for the whole map (one per worker), so modules imported
+once are reused by every task; on Linux the pool forks, and whatever the caller imported before
+the call is already loaded.
 """
 
 from __future__ import annotations
@@ -44,7 +47,10 @@ class Outcome(Generic[T]):
 
 
 def _one_line(exc: BaseException) -> str:
+    """A user error's own message; anything else prefixed with its type (first line only)."""
     text = str(exc).strip().splitlines()
+    if isinstance(exc, BslamError) and text:
+        return text[0]
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
@@ -65,10 +71,6 @@ def _collect(result: Callable[[], Outcome[T]], index: int) -> Outcome[T]:
         return Outcome(index, None, _one_line(exc), 0.0)
 
 
-def _bar(total: int, desc: str, progress: bool) -> tqdm[Any]:
-    return tqdm(total=total, desc=desc, unit="run", file=sys.stderr, disable=not progress)
-
-
 def run_tasks(
     fn: Callable[[A], T],
     tasks: Sequence[A],
@@ -76,7 +78,10 @@ def run_tasks(
     workers: int = 1,
     scheduler: str | None = None,
     desc: str = "runs",
+    unit: str = "run",
     progress: bool = True,
+    on_outcome: Callable[[Outcome[T]], None] | None = None,
+    connect_timeout: str = "10s",
 ) -> list[Outcome[T]]:
     """Apply ``fn`` to every task and return the outcomes in task order.
 
@@ -91,34 +96,48 @@ def run_tasks(
     scheduler : str, optional
         Address of a Dask scheduler (``tcp://host:8786``); when given, ``workers`` is ignored
         and the cluster's workers run the tasks.
-    desc : str
-        Label of the progress bar.
+    desc, unit : str
+        Label and unit of the progress bar.
     progress : bool
         Show the progress bar on stderr.
+    on_outcome : callable, optional
+        Called in this process with each outcome as soon as its task finishes.
+    connect_timeout : str
+        How long to try reaching the Dask scheduler (Dask duration, e.g. ``"10s"``).
 
     Returns
     -------
     list of Outcome
         One per task, in the order of ``tasks``.
+
+    Raises
+    ------
+    SchedulerError
+        ``scheduler`` cannot be reached.
     """
     guarded = partial(_guarded, fn)
     outcomes: list[Outcome[T]] = []
-    if scheduler is not None:
-        outcomes = _run_dask(guarded, tasks, scheduler, desc, progress)
-    elif workers <= 1 or len(tasks) <= 1:
-        with _bar(len(tasks), desc, progress) as bar:
+    bar = tqdm(total=len(tasks), desc=desc, unit=unit, file=sys.stderr, disable=not progress)
+
+    def done(outcome: Outcome[T]) -> None:
+        outcomes.append(outcome)
+        bar.update()
+        if on_outcome is not None:
+            on_outcome(outcome)
+
+    with bar:
+        if scheduler is not None:
+            _run_dask(guarded, tasks, scheduler, connect_timeout, done)
+        elif workers <= 1 or len(tasks) <= 1:
             for i, task in enumerate(tasks):
-                outcomes.append(guarded(i, task))
-                bar.update()
-    else:
-        with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
-            futures: dict[Future[Outcome[T]], int] = {
-                pool.submit(guarded, i, task): i for i, task in enumerate(tasks)
-            }
-            with _bar(len(tasks), desc, progress) as bar:
+                done(guarded(i, task))
+        else:
+            with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
+                futures: dict[Future[Outcome[T]], int] = {
+                    pool.submit(guarded, i, task): i for i, task in enumerate(tasks)
+                }
                 for fut in as_completed(futures):
-                    outcomes.append(_collect(fut.result, futures[fut]))
-                    bar.update()
+                    done(_collect(fut.result, futures[fut]))
     return sorted(outcomes, key=lambda o: o.index)
 
 
@@ -126,22 +145,18 @@ def _run_dask(
     guarded: Callable[[int, A], Outcome[T]],
     tasks: Sequence[A],
     scheduler: str,
-    desc: str,
-    progress: bool,
-) -> list[Outcome[T]]:
+    connect_timeout: str,
+    done: Callable[[Outcome[T]], Any],
+) -> None:
     from distributed import Client
     from distributed import as_completed as dask_as_completed
 
-    outcomes: list[Outcome[T]] = []
     try:
-        client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
+        client = Client(scheduler, timeout=connect_timeout)  # type: ignore[no-untyped-call]
     except (OSError, TimeoutError, ValueError) as exc:
         raise SchedulerError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
     with client:
         futures = client.map(guarded, list(range(len(tasks))), list(tasks), pure=False)
         index = {fut.key: i for i, fut in enumerate(futures)}
-        with _bar(len(tasks), desc, progress) as bar:
-            for fut in dask_as_completed(futures):  # type: ignore[no-untyped-call]
-                outcomes.append(_collect(fut.result, index[fut.key]))
-                bar.update()
-    return outcomes
+        for fut in dask_as_completed(futures):  # type: ignore[no-untyped-call]
+            done(_collect(fut.result, index[fut.key]))

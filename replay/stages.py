@@ -4,7 +4,9 @@
 (:mod:`replay.records`) to sinks. Frames are decoded only where a sink needs them (keyframes
 for the estimate; every frame for Rerun). A movement is processed when its end keyframe
 arrives; one that cannot be used (missing keyframe, reference landmark not visible, degenerate
-geometry) is skipped with its reason and processing goes on.
+geometry) is skipped with its reason and processing goes on; the reason is in the movement's
+record (so in the summary) and is logged as a warning on the ``bslam.replay`` logger, which
+prints nothing unless the application configures it (the CLI does for one log).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ CAMERA_TOPIC = "/camera/panorama"
 CREDIBLE_P = 0.8
 
 logger = logging.getLogger("bslam.replay")
+logger.addHandler(logging.NullHandler())  # quiet unless the application asks (CLI: show_skips)
 
 
 def decode_image(msg: dict[str, Any]) -> NDArray[np.uint8]:

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import logging
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -49,14 +52,32 @@ def method_options(fn: click.decorators.FC) -> click.decorators.FC:
     return fn
 
 
-def show_skips() -> None:
-    """Print skipped movements (with the reason) to stderr."""
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("warning: %(message)s"))
+class _WarningEcho(logging.Handler):
+    """Echo each record to the current stderr as ``warning: <message>``."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        click.echo(f"warning: {record.getMessage()}", err=True)
+
+
+@contextmanager
+def show_skips() -> Iterator[None]:
+    """Print skipped movements (with the reason) to stderr while the block runs.
+
+    The library logs them on the ``bslam`` loggers and prints nothing by itself; commands that
+    handle one log turn this on, runs of many logs count skips in their result lines instead.
+    """
     logger = logging.getLogger("bslam")
+    handler = _WarningEcho(logging.WARNING)
+    level, propagate = logger.level, logger.propagate
     logger.addHandler(handler)
     logger.setLevel(logging.WARNING)
     logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+        logger.propagate = propagate
 
 
 @click.command("process")
@@ -98,35 +119,45 @@ def process(
     """Process LOGS (files, folders or globs) into maps.
 
     Each log goes through bearing extraction, initialization in FR, change of frame and fusion
-    in FL. With one log and neither --out nor --summary, the summary JSON goes to stdout.
-    Several logs run in parallel; one failing log is reported and the others go on.
+    in FL. With one log and neither --out nor --summary, the summary JSON goes to stdout, and
+    each skipped movement is reported on stderr. Several logs run in parallel with one result
+    line per log (skips are counted there); one failing log is reported and the others go on.
     """
     from tqdm import tqdm
 
-    from replay.batch import expand_logs, plan_jobs, run_jobs
+    from replay.batch import expand_logs, plan_jobs, process_job
+    from replay.parallel import Outcome, run_tasks
     from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
 
-    show_skips()
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
     paths = expand_logs(logs)
     if len(paths) == 1 and scheduler is None:
-        doc = process_log(paths[0], method, out=out, summary=summary)
+        with show_skips():
+            doc = process_log(paths[0], method, out=out, summary=summary)
         if out is None and summary is None:
             click.echo(dumps(doc))
         else:
             click.echo(f"{paths[0]}: {result_line(doc)}")
         return
     jobs = plan_jobs(paths, out, summary, method)
-    failed = 0
-    bar = tqdm(total=len(jobs), desc="logs", unit="log", file=sys.stderr)
-    for outcome in run_jobs(jobs, workers=workers, scheduler=scheduler):
-        bar.update()
-        if outcome.ok:
-            tqdm.write(f"{outcome.log}: {outcome.message}", file=sys.stdout)
+
+    def report(outcome: Outcome[dict[str, Any]]) -> None:
+        log = jobs[outcome.index].log
+        if outcome.value is not None:
+            tqdm.write(f"{log}: {result_line(outcome.value)}", file=sys.stdout)
         else:
-            failed += 1
-            tqdm.write(f"{outcome.log}: FAILED: {outcome.message}", file=sys.stderr)
-    bar.close()
+            tqdm.write(f"{log}: FAILED: {outcome.error}", file=sys.stderr)
+
+    outcomes = run_tasks(
+        process_job,
+        jobs,
+        workers=workers,
+        scheduler=scheduler,
+        desc="logs",
+        unit="log",
+        on_outcome=report,
+    )
+    failed = sum(1 for o in outcomes if not o.ok)
     if failed:
         raise click.ClickException(f"{failed} of {len(jobs)} logs failed (see above)")

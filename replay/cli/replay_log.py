@@ -54,12 +54,12 @@ def replay(
         save = Path(log.stem + ".rrd")
     where = str(save) if save else connect
     target = RerunTarget(chosen[0] if chosen else "save", where)  # type: ignore[arg-type]
-    show_skips()
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
     with ProcessableLog(log) as opened:  # a bad log fails here, before any output exists
         rec, url = open_recording(log.stem, target)
         try:
-            doc = replay_log(opened, method, rec, images=not keyframes_only)
+            with show_skips():
+                doc = replay_log(opened, method, rec, images=not keyframes_only)
         finally:
             if not serve:
                 rec.disconnect()

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -13,8 +16,9 @@ from logfactory import MOVES, write_log
 from mcap.reader import make_reader
 
 from data_schemas.codec import validate_message
-from replay.batch import LogJob, SchedulerError, expand_logs, plan_jobs, run_jobs
+from replay.batch import LogJob, expand_logs, plan_jobs, process_job
 from replay.cli import cli
+from replay.parallel import SchedulerError, run_tasks
 from replay.process import process_log
 from replay.records import MethodConfig
 
@@ -114,17 +118,58 @@ def test_derived_log_channels_validate(small_log: Path, tmp_path: Path) -> None:
     assert json.loads(meta["bslam.session"]["json"])["derived"]["source"] == small_log.name
 
 
-def test_many_logs_one_bad(tmp_path: Path, small_log: Path) -> None:
+def _hide_l1_in_movement_1(i: int, phase: str) -> tuple[str, ...]:
+    return ("L1",) if i == 1 else ()
+
+
+QUIET_RUN = """
+import sys
+from replay.process import process_log
+from replay.records import MethodConfig
+doc = process_log(sys.argv[1], MethodConfig())
+print(doc["movements"][1]["status"])
+"""
+
+
+def test_library_prints_nothing_for_skips(tmp_path: Path) -> None:
+    """As in an experiment run or a pool worker: no logging configured, nothing on stderr."""
+    log = write_log(tmp_path / "quiet.mcap", hidden=_hide_l1_in_movement_1)
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run(
+        [sys.executable, "-c", QUIET_RUN, str(log)],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )
+    assert done.stdout.startswith("skipped: ")
+    assert done.stderr == ""
+
+
+def test_one_log_reports_each_skipped_movement(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "hidden.mcap", hidden=_hide_l1_in_movement_1)
+    result = CliRunner().invoke(cli, ["process", str(log), "--summary", str(tmp_path / "s.json")])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.output.splitlines() if line.startswith("warning: ")]
+    assert len(warnings) == 1 and "hidden.mcap: movement 1 skipped: " in warnings[0]
+
+
+def test_many_logs_one_bad_one_line_each(tmp_path: Path) -> None:
     folder = tmp_path / "many"
     folder.mkdir()
     for i in range(2):
-        write_log(folder / f"run{i}.mcap")
+        write_log(folder / f"run{i}.mcap", hidden=_hide_l1_in_movement_1)
     (folder / "broken.mcap").write_text("not a log")
     result = CliRunner().invoke(
         cli, ["process", str(folder), "--summary", str(tmp_path / "sums"), "--workers", "2"]
     )
     assert result.exit_code == 1
-    assert "broken.mcap: FAILED:" in result.output and "not an MCAP file" in result.output
+    lines = [line for line in result.output.splitlines() if ".mcap: " in line]
+    assert len(lines) == 3, result.output  # one line per log, no per-movement warnings
+    assert "warning" not in result.output
+    broken = next(line for line in lines if "broken.mcap" in line)
+    assert "broken.mcap: FAILED: " in broken and "not an MCAP file" in broken
+    assert sum(f"2/{len(MOVES)} movements used" in line for line in lines) == 2
     assert "1 of 3 logs failed" in result.output
     assert sorted(p.name for p in (tmp_path / "sums").iterdir()) == [
         "run0.summary.json",
@@ -136,19 +181,20 @@ def test_dask_local_cluster_gives_same_results(tmp_path: Path) -> None:
     distributed = pytest.importorskip("distributed")
     logs = [write_log(tmp_path / f"d{i}.mcap") for i in range(2)]
     jobs = plan_jobs(expand_logs([str(tmp_path / "d*.mcap")]), None, None, MethodConfig())
-    local = {o.log: o.summary for o in run_jobs(jobs)}
+    assert [j.log for j in jobs] == logs
+    local = [o.value for o in run_tasks(process_job, jobs, progress=False)]
     with distributed.LocalCluster(
         n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
     ) as cluster:
-        remote = {o.log: o.summary for o in run_jobs(jobs, scheduler=cluster.scheduler_address)}
-    assert set(remote) == set(logs)
-    assert remote == local
+        remote = run_tasks(process_job, jobs, scheduler=cluster.scheduler_address, progress=False)
+    assert all(o.ok for o in remote)
+    assert [o.value for o in remote] == local
 
 
 def test_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
     jobs = plan_jobs([write_log(tmp_path / "u.mcap")], None, None, MethodConfig())
     with pytest.raises(SchedulerError, match=r"^cannot reach the Dask scheduler at tcp://127"):
-        list(run_jobs(jobs, scheduler="tcp://127.0.0.1:9", connect_timeout="1s"))
+        run_tasks(process_job, jobs, scheduler="tcp://127.0.0.1:9", connect_timeout="1s")
 
 
 def test_job_is_picklable() -> None:
