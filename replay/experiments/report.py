@@ -39,8 +39,13 @@ class MethodRow:
     vs_impartial: PairedDifference | None
 
 
-def _n_l(cfg: dict[str, Any], method: str) -> int:
-    return int(cfg["protocol"]["n_l"]) if method in cfg["protocol"]["priors"] else 0
+def _n_l(cfg: dict[str, Any], method: str, group: str | None = None) -> int:
+    """Particles in FL of ``method``'s rows: 0 for yardsticks, the group's value in an n_l sweep."""
+    if method not in cfg["protocol"]["priors"]:
+        return 0
+    if group is not None and cfg.get("param") == "n_l":
+        return int(group.split("=", 1)[1])
+    return int(cfg["protocol"]["n_l"])
 
 
 def _nan_band() -> Band:
@@ -54,7 +59,9 @@ def method_table(results: Results, *, group: str | None = None) -> list[MethodRo
     early_m = int(cfg["protocol"]["n_l_movements"])
     final_m = int(cfg["protocol"]["movements"])
     curves = {
-        m: movement_curve(results.rows, method=m, n_l=_n_l(cfg, m), landmarks=scored, group=group)
+        m: movement_curve(
+            results.rows, method=m, n_l=_n_l(cfg, m, group), landmarks=scored, group=group
+        )
         for m in cfg["methods"]
     }
     ls = curves.get("batch_ls", {})
@@ -63,7 +70,7 @@ def method_table(results: Results, *, group: str | None = None) -> list[MethodRo
         chosen = select(
             results.rows,
             method=method,
-            n_l=_n_l(cfg, method),
+            n_l=_n_l(cfg, method, group),
             movement=movement,
             landmarks=scored,
             group=group,
@@ -76,7 +83,7 @@ def method_table(results: Results, *, group: str | None = None) -> list[MethodRo
         final = curve.get(final_m, _nan_band())
         ls_early = ls.get(early_m, _nan_band()).mean
         ls_final = ls.get(final_m, _nan_band()).mean
-        n_l = _n_l(cfg, method)
+        n_l = _n_l(cfg, method, group)
         coverage, _ = calibration(
             select(results.rows, method=method, n_l=n_l, landmarks=scored, group=group)
         )
@@ -117,9 +124,11 @@ def table_markdown(results: Results, *, group: str | None = None) -> str:
     ]
     for row in method_table(results, group=group):
         vs = "–"
-        if row.vs_impartial is not None:
+        if row.vs_impartial is not None and math.isfinite(row.vs_impartial.mean):
             vs = f"{row.vs_impartial.mean:+.2f} (p = {_fmt(row.vs_impartial.p_value, 3)})"
-        cover = "–" if row.method in (CRB, "batch_ls") else f"{100 * row.coverage_80:.0f}%"
+        cover = "–"
+        if row.method not in (CRB, "batch_ls") and math.isfinite(row.coverage_80):
+            cover = f"{100 * row.coverage_80:.0f}%"
         lines.append(
             f"| {METHOD_LABELS[row.method]} | {_band(row.early)} | {_band(row.final)} "
             f"| {_fmt(row.ratio_to_ls_early)}, {_fmt(row.ratio_to_ls_final)} | {cover} | {vs} |"

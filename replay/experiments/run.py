@@ -6,9 +6,12 @@ summary stay on disk (``run_000.mcap``, ``run_000.summary.json``) for ``bslam re
 
 from __future__ import annotations
 
+import io
 import json
 import math
+import threading
 import time
+from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +31,8 @@ from replay.experiments.methods import (
 from replay.experiments.protocol import Protocol
 from replay.experiments.results import ErrorRow
 from replay.truth import truth_from_scenario
+
+_CONSOLE = threading.Lock()  # held while a simulation's console output is redirected
 
 
 @dataclass(frozen=True)
@@ -112,14 +117,18 @@ def simulate(scenario: dict[str, Any], log: Path, *, seed: int) -> None:
     """Write the run's scenario beside the log and simulate it (``bslam simulate``, in process).
 
     Going through the command keeps to its contract (``--scenario``, ``--out``, ``--seed``)
-    without a new interpreter per run; a user error surfaces as ``click.ClickException``.
+    without a new interpreter per run; a user error surfaces as ``click.ClickException``. The
+    command's console output (its progress bar, its "wrote" line) would break the experiment's
+    progress bar, so it is dropped: redirecting ``sys.stdout``/``sys.stderr`` is process-wide,
+    hence the lock, which keeps threads of one Dask worker from interleaving redirections.
     """
     from replay.cli import cli
 
     scenario_path = log.with_suffix(".scenario.json")
     scenario_path.write_text(json.dumps(scenario, indent=1) + "\n", encoding="utf-8")
     args = ["simulate", "--scenario", str(scenario_path), "--out", str(log), "--seed", str(seed)]
-    cli.main(args, prog_name="bslam", standalone_mode=False)
+    with _CONSOLE, redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+        cli.main(args, prog_name="bslam", standalone_mode=False)
 
 
 def true_keyframes(log: Path) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:

@@ -109,3 +109,50 @@ def test_out_is_a_file_and_unknown_sweep_param(tmp_path: Path) -> None:
     )
     assert code == 1 and "unknown sweep parameter 'speed'" in output
     assert len(output.strip().splitlines()) == 1
+
+
+@needs_simulate
+def test_tiny_sweep_end_to_end_is_quiet(tmp_path: Path) -> None:
+    out = tmp_path / "sweep"
+    args = [
+        "experiment",
+        "sweep",
+        "--out",
+        str(out),
+        "--param",
+        "n_l",
+        "--values",
+        "40,80",
+        "--runs",
+        "2",
+        "--movements",
+        "4",
+        "--n-r",
+        "30",
+        "--priors",
+        "impartial,mixture",
+        "--workers",
+        "1",
+        "--quiet",
+    ]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    # one summary line: no simulator output, no skipped-movement warnings from the runs
+    assert result.output.strip().splitlines() == [result.output.strip()]
+    assert result.output.startswith("4/4 runs ok")
+    res = read_results(out)
+    assert sorted({r.group for r in res.runs}) == ["n_l=40", "n_l=80"]
+    for value in (40, 80):
+        rows = [r for r in res.rows if r.group == f"n_l={value}" and r.method == "impartial"]
+        assert {r.n_l for r in rows} == {value}
+        assert len(rows) == 2 * 4 * 2  # runs x movements x scored landmarks
+        last = [r for r in rows if r.movement == 4]
+        assert all(math.isfinite(r.error_cm) and 0 <= r.error_cm < 30 for r in last)
+    assert {r.method for r in res.rows} == {"impartial", "mixture", "batch_ls", "crb"}
+    assert (out / "sweep_n_l.png").stat().st_size > 0
+    report = (out / "report.md").read_text()
+    tables = report.split("## n_l=")[1:]
+    assert [t.split("\n", 1)[0] for t in tables] == ["40", "80"]
+    for table in tables:  # every value's table has numbers for the swept prior
+        line = next(x for x in table.splitlines() if x.startswith("| impartial PDF |"))
+        assert "nan" not in line and line.split("|")[2].strip()[0].isdigit(), line
