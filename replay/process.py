@@ -11,7 +11,6 @@ from typing import Any
 from data_schemas.errors import LogError
 from replay.logs import ProcessableLog
 from replay.records import MethodConfig, Sink
-from replay.sinks.derived import DerivedLogSink
 from replay.sinks.summary import SummarySink
 from replay.stages import run_log
 
@@ -59,6 +58,8 @@ def process_log(
     summary_sink = SummarySink()
     sinks: list[Sink] = [summary_sink, *extra_sinks]
     if out is not None:
+        from replay.sinks.derived import DerivedLogSink  # the MCAP writer only when asked
+
         source = log.path if isinstance(log, ProcessableLog) else Path(log)
         if Path(out).resolve() == source.resolve():
             raise LogError(f"{log}: --out would overwrite the source log; choose another path")

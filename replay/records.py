@@ -93,6 +93,9 @@ class FrameRecord:
         The decoded frame, kept only when a sink asked for images.
     masks : dict name -> (H, W) bool, or None
         Colour masks, kept only when a sink asked for them.
+    png : bytes or None
+        The frame's PNG file as logged (None for raw frames), kept with ``image_bgr`` so a sink
+        can pass the frame on without encoding it again.
     """
 
     timestamp_ns: int
@@ -101,6 +104,7 @@ class FrameRecord:
     detections: Mapping[str, DetectionRecord]
     image_bgr: NDArray[np.uint8] | None = None
     masks: Mapping[str, NDArray[np.bool_]] | None = None
+    png: bytes | None = None
 
 
 @dataclass(frozen=True)
@@ -199,7 +203,7 @@ class Sink(Protocol):
     """Receives the stages' results of one log, in log-time order.
 
     ``wants_all_frames``: the runner decodes every frame (not only keyframes) for this sink.
-    ``wants_images``: frames carry ``image_bgr`` and ``masks``.
+    ``wants_images``: frames carry ``image_bgr``, ``masks`` and (PNG frames) ``png``.
     """
 
     wants_all_frames: bool

@@ -46,21 +46,31 @@ logger = logging.getLogger("bslam.replay")
 logger.addHandler(logging.NullHandler())  # quiet unless the application asks (CLI: show_skips)
 
 
-def decode_image(msg: dict[str, Any]) -> NDArray[np.uint8]:
-    """BGR image of a ``foxglove.CompressedImage`` (png) or ``foxglove.RawImage`` (bgr8) message."""
+def decode_image(msg: dict[str, Any]) -> tuple[NDArray[np.uint8], bytes | None]:
+    """A ``foxglove.CompressedImage`` (png) or ``foxglove.RawImage`` (bgr8) frame message.
+
+    Returns
+    -------
+    image_bgr : (H, W, 3) uint8
+        The decoded frame.
+    png : bytes or None
+        The PNG file as logged (CompressedImage), None for a raw frame.
+    """
     try:
         data = base64.b64decode(msg["data"], validate=True)
     except (KeyError, ValueError) as exc:
         raise ImageError(f"/camera/panorama: frame data is not base64 ({exc})") from None
     if "format" in msg:
-        return decode_frame(data, str(msg["format"]))
-    return decode_frame(
+        fmt = str(msg["format"])
+        return decode_frame(data, fmt), data if fmt.lower() == "png" else None
+    image = decode_frame(
         data,
         str(msg.get("encoding", "")),
         width=int(msg["width"]),
         height=int(msg["height"]),
         step=int(msg["step"]) if "step" in msg else None,
     )
+    return image, None
 
 
 def _detection_record(d: Detection) -> DetectionRecord:
@@ -160,15 +170,20 @@ class Runner:
     def _frame(
         self, doc: dict[str, Any], t_ns: int, log_time_ns: int, keys: list[tuple[int, str]]
     ) -> None:
-        image = decode_image(doc)
-        detections = {k: _detection_record(d) for k, d in self.extractor.extract(image).items()}
+        image, png = decode_image(doc)
+        if self.images:
+            found, masks = self.extractor.extract_with_masks(image)
+        else:
+            found, masks = self.extractor.extract(image), None
+        detections = {k: _detection_record(d) for k, d in found.items()}
         frame = FrameRecord(
             timestamp_ns=t_ns,
             log_time_ns=log_time_ns,
             keyframe=keys[0] if keys else None,
             detections=detections,
             image_bgr=image if self.images else None,
-            masks=self.extractor.masks(image) if self.images else None,
+            masks=masks,
+            png=png if self.images else None,
         )
         for sink in self.sinks:
             sink.frame(frame)

@@ -4,8 +4,9 @@ Timelines: ``log_time`` (when the recorder wrote the frame) and ``movement`` (mo
 Entities (the blueprint in :mod:`replay.blueprint` lays them out):
 
 =============================== ===================================================
-``camera/panorama``             the frame (BGR), with ``/masks`` (segmentation, one class per
-                                landmark) and ``/detections`` (a line per bearing, labelled)
+``camera/panorama``             the frame (the logged PNG as is; raw frames as BGR pixels), with
+                                ``/masks`` (segmentation, one class per landmark) and
+                                ``/detections`` (a line per bearing, labelled)
 ``bearings/<name>``             bearing in degrees over time
 ``fr/cones/<name>``             per movement, the two vision cones (FR: O1 = (0, 0), O2 = (1, 0))
 ``fr/particles/<name>``         per movement, the particles drawn in the cones' intersection
@@ -20,6 +21,9 @@ Entities (the blueprint in :mod:`replay.blueprint` lays them out):
 ``fig1/...``                    the paper's Fig. 1 for this log's eps (:mod:`replay.fig1`)
 =============================== ===================================================
 
+Frame-level entities (panorama, masks, detections, bearings) are gathered and sent as columns
+every :data:`BATCH_FRAMES` frames and at the end; the rest is logged as it comes.
+
 Rerun's 2-D views draw y downwards; the ``fr`` and ``map`` roots carry a static y-flip so FR and
 FL are drawn with y up while the logged values stay in their frame.
 """
@@ -27,7 +31,8 @@ FL are drawn with y up while the logged values stay in their frame.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
 
 import numpy as np
 import rerun as rr
@@ -45,6 +50,8 @@ Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]
 FR_APEXES = ((0.0, 0.0), (1.0, 0.0))
 TRUTH_RGB = (240, 240, 240)
 TRAJECTORY_RGB = (255, 160, 0)
+#: frames gathered before their entities are sent (as columns) to the recording
+BATCH_FRAMES = 64
 
 
 def landmark_rgb(session: Session) -> dict[str, tuple[int, int, int]]:
@@ -86,6 +93,45 @@ def detection_segments(
     return segments
 
 
+@dataclass
+class _FrameBatch:
+    """Frame-level values of up to :data:`BATCH_FRAMES` frames, each keyed by its row.
+
+    :meth:`RerunSink._send_frames` sends them as columns: a few ``send_columns`` calls per
+    batch instead of several ``log`` calls per frame.
+    """
+
+    log_time_ns: list[int] = field(default_factory=list)
+    movement: list[int] = field(default_factory=list)  # -1: not a keyframe
+    png: dict[int, bytes] = field(default_factory=dict)
+    labels: dict[int, NDArray[np.uint8]] = field(default_factory=dict)  # (H, W) class ids
+    detections: dict[int, dict[str, float]] = field(default_factory=dict)  # name -> bearing
+    bearings_deg: dict[str, dict[int, float]] = field(default_factory=dict)
+
+    def add_row(self, log_time_ns: int, movement: int | None) -> int:
+        """Start the row of one frame; return its index."""
+        self.log_time_ns.append(log_time_ns)
+        self.movement.append(-1 if movement is None else movement)
+        return len(self.log_time_ns) - 1
+
+    def timed(self, rows: Iterable[int]) -> Iterator[tuple[list[int], list[rr.TimeColumn]]]:
+        """``rows`` split into keyframes (both timelines) and the other frames (log time only)."""
+        rows = list(rows)
+        key = [r for r in rows if self.movement[r] >= 0]
+        other = [r for r in rows if self.movement[r] < 0]
+        if key:
+            yield key, [self._log_time(key), rr.TimeColumn(MOVEMENT, sequence=self._at(key))]
+        if other:
+            yield other, [self._log_time(other)]
+
+    def _at(self, rows: list[int]) -> list[int]:
+        return [self.movement[r] for r in rows]
+
+    def _log_time(self, rows: list[int]) -> rr.TimeColumn:
+        ns = np.array([self.log_time_ns[r] for r in rows], np.int64)
+        return rr.TimeColumn(LOG_TIME, timestamp=ns.astype("datetime64[ns]"))
+
+
 class RerunSink:
     """Streams one log's stage results to a :class:`rerun.RecordingStream`.
 
@@ -105,6 +151,7 @@ class RerunSink:
         self._rgb: dict[str, tuple[int, int, int]] = {}
         self._trajectory_fl: list[NDArray[np.float64]] = []
         self._truth_trajectory_fl: list[NDArray[np.float64]] = []
+        self._batch = _FrameBatch()
 
     # ------------------------------------------------------------------ start
     def start(self, run: RunInfo) -> None:
@@ -119,6 +166,13 @@ class RerunSink:
         for i, name in enumerate(s.landmark_names(), start=1):
             classes.append(rr.ClassDescription(info=(i, name, self._rgb[name])))
         log("camera/panorama", rr.AnnotationContext(classes), static=True)
+        mask_format = rr.components.ImageFormat(
+            width=s.calibration.width, height=s.calibration.height, channel_datatype="U8"
+        )
+        masks = rr.SegmentationImage.from_fields(format=mask_format, opacity=0.5)
+        log("camera/panorama/masks", masks, static=True)
+        lines = rr.LineStrips2D.from_fields(radii=rr.Radius.ui_points(1.5))
+        log("camera/panorama/detections", lines, static=True)
         for name in s.landmark_names():
             series = rr.SeriesPoints(colors=[self._rgb[name]], names=[name], marker_sizes=[2.0])
             log(f"bearings/{name}", series, static=True)
@@ -167,36 +221,58 @@ class RerunSink:
     # ------------------------------------------------------------------ frames
     def frame(self, frame: FrameRecord) -> None:
         assert self._run is not None
-        s = self._run.session
         movement = frame.keyframe[0] if frame.keyframe else None
-        self._set_time(frame.log_time_ns, movement)
-        log = self.rec.log
-        if frame.image_bgr is not None:
-            log("camera/panorama", rr.Image(frame.image_bgr, color_model="BGR"))
+        batch = self._batch
+        row = batch.add_row(frame.log_time_ns, movement)
+        if frame.png is not None:  # the logged PNG as is: no decoding, no raw pixels to copy
+            batch.png[row] = frame.png
+        elif frame.image_bgr is not None:
+            self._set_time(frame.log_time_ns, movement)
+            self.rec.log("camera/panorama", rr.Image(frame.image_bgr, color_model="BGR"))
         if frame.masks is not None:
             labels = np.zeros(next(iter(frame.masks.values())).shape, np.uint8)
-            for i, name in enumerate(s.landmark_names(), start=1):
+            for i, name in enumerate(self._run.session.landmark_names(), start=1):
                 mask = frame.masks.get(name)
                 if mask is not None:
                     labels[mask] = i
-            log("camera/panorama/masks", rr.SegmentationImage(labels, opacity=0.5))
+            batch.labels[row] = labels
         seen = {
             d.name: d.bearing_rad
             for d in frame.detections.values()
             if d.visible and d.bearing_rad is not None
         }
         if frame.image_bgr is not None:
-            log(
-                "camera/panorama/detections",
-                rr.LineStrips2D(
-                    detection_segments(s.calibration, seen.values()),
-                    colors=[self._rgb[n] for n in seen],
-                    labels=[f"{n} {math.degrees(b):.1f}°" for n, b in seen.items()],
-                    radii=rr.Radius.ui_points(1.5),
-                ),
-            )
+            batch.detections[row] = seen
         for name, b in seen.items():
-            log(f"bearings/{name}", rr.Scalars(math.degrees(b)))
+            batch.bearings_deg.setdefault(name, {})[row] = math.degrees(b)
+        if len(batch.log_time_ns) >= BATCH_FRAMES:
+            self._send_frames()
+
+    def _send_frames(self) -> None:
+        """Send the gathered frames' entities as columns and start a new batch."""
+        assert self._run is not None
+        cal = self._run.session.calibration
+        batch, send = self._batch, self.rec.send_columns
+        for rows, times in batch.timed(batch.png):
+            blobs = [batch.png[r] for r in rows]
+            columns = rr.EncodedImage.columns(blob=blobs, media_type=["image/png"] * len(rows))
+            send("camera/panorama", indexes=times, columns=columns)
+        for rows, times in batch.timed(batch.labels):
+            buffers = [batch.labels[r].ravel() for r in rows]
+            send("camera/panorama/masks", times, rr.SegmentationImage.columns(buffer=buffers))
+        for rows, times in batch.timed(batch.detections):
+            seen = [batch.detections[r] for r in rows]
+            strips = rr.LineStrips2D.columns(
+                strips=[s for d in seen for s in detection_segments(cal, d.values())],
+                colors=[self._rgb[n] for d in seen for n in d],
+                labels=[f"{n} {math.degrees(b):.1f}°" for d in seen for n, b in d.items()],
+            )
+            send("camera/panorama/detections", times, strips.partition([len(d) for d in seen]))
+        for name, values in batch.bearings_deg.items():
+            for rows, times in batch.timed(values):
+                degrees = rr.Scalars.columns(scalars=[values[r] for r in rows])
+                send(f"bearings/{name}", indexes=times, columns=degrees)
+        self._batch = _FrameBatch()
 
     # ------------------------------------------------------------------ movements
     def movement(self, record: MovementRecord) -> None:
@@ -301,4 +377,6 @@ class RerunSink:
         )
 
     def finish(self) -> None:
-        """Nothing buffered here; the caller flushes or disconnects the stream."""
+        """Send the frames still gathered; the caller flushes or disconnects the stream."""
+        if self._run is not None and self._batch.log_time_ns:
+            self._send_frames()

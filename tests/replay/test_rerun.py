@@ -11,7 +11,7 @@ import pyarrow as pa
 import pytest
 import rerun as rr
 from click.testing import CliRunner
-from logfactory import MOVES
+from logfactory import HEIGHT, MOVES
 
 from replay.cli import cli
 from replay.process import process_log
@@ -74,11 +74,31 @@ def test_every_stage_is_an_entity(replayed: tuple[Path, dict[str, Any]]) -> None
 def test_frames_and_masks(replayed: tuple[Path, dict[str, Any]]) -> None:
     rows = _read(replayed[0])
     n_frames = 4 * len(MOVES)  # two keyframes and two frames between per movement
-    assert len(_column(rows["/camera/panorama"], "Image:buffer")) == n_frames
+    assert len(_column(rows["/camera/panorama"], "EncodedImage:blob")) == n_frames
     masks = _column(rows["/camera/panorama/masks"], "SegmentationImage:buffer")
     assert len(masks) == n_frames
     classes = set(np.concatenate([np.asarray(m[0], np.uint8) for m in masks]).tolist())
     assert classes == {0, 1, 2, 3, 4}  # background and the four landmarks
+
+
+def test_detections_mark_every_bearing(replayed: tuple[Path, dict[str, Any]]) -> None:
+    rrd, doc = replayed
+    rows = [r for r in _read(rrd)["/camera/panorama/detections"] if "LineStrips2D:strips" in r]
+    assert len(rows) == 4 * len(MOVES)
+    for r in rows:
+        assert len(r["LineStrips2D:labels"]) == len(r["LineStrips2D:strips"]) == 4
+        for strip in r["LineStrips2D:strips"]:  # a vertical line across the unwrapped panorama
+            (u0, v0), (u1, v1) = strip
+            assert u0 == u1 and v0 == 0.0 and v1 == HEIGHT
+    labelled = sorted(
+        float(label.split()[1].rstrip("°"))
+        for r in rows
+        if r.get("movement") is not None
+        for label in r["LineStrips2D:labels"]
+        if label.startswith("L4 ")
+    )
+    used = sorted(b for m in doc["movements"] for b in m["bearings_deg"]["L4"])
+    assert labelled == pytest.approx(used, abs=0.051)
 
 
 def test_bearings_are_the_summary_bearings(replayed: tuple[Path, dict[str, Any]]) -> None:
