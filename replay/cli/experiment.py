@@ -177,6 +177,7 @@ def paper(**kw: Any) -> None:
 def sweep(**kw: Any) -> None:
     """Vary one parameter: one group of runs per value, a figure, a table per value."""
     from replay.experiments.experiment import sweep_experiment
+    from replay.experiments.report import sweep_table_markdown
 
     out = _out_dir(kw["out"])
     values = [v.strip() for v in kw["values"].split(",") if v.strip()]
@@ -194,6 +195,7 @@ def sweep(**kw: Any) -> None:
         progress=not kw["quiet"],
         command=_command(),
     )
+    click.echo(sweep_table_markdown(results))
     _finish(results, out)
 
 

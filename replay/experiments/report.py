@@ -136,6 +136,33 @@ def table_markdown(results: Results, *, group: str | None = None) -> str:
     return "\n".join(lines)
 
 
+def sweep_table_markdown(results: Results) -> str:
+    """One line per swept value: each method's mean error after the early and the last movement,
+    and how often the impartial PDF's 80% region holds the truth."""
+    cfg = results.config
+    early_m, final_m = cfg["protocol"]["n_l_movements"], cfg["protocol"]["movements"]
+    methods = cfg["methods"]
+    lines = [
+        f"Mean error (cm) over runs after {early_m} / {final_m} movements:",
+        "",
+        f"| {cfg['param']} | "
+        + " | ".join(METHOD_LABELS[m] for m in methods)
+        + " | impartial: 80% region holds truth |",
+        "|---|" + "---|" * (len(methods) + 1),
+    ]
+    for value in cfg["values"]:
+        rows = {r.method: r for r in method_table(results, group=f"{cfg['param']}={value}")}
+        cells = [f"{_fmt(rows[m].early.mean)} / {_fmt(rows[m].final.mean)}" for m in methods]
+        imp = rows.get("impartial")
+        cover = (
+            "–"
+            if imp is None or not math.isfinite(imp.coverage_80)
+            else (f"{100 * imp.coverage_80:.0f}%")
+        )
+        lines.append(f"| {value} | " + " | ".join(cells) + f" | {cover} |")
+    return "\n".join(lines)
+
+
 def n_l_flatness(results: Results) -> tuple[dict[int, Band], float]:
     """Fig. 8 bands and their relative spread (max - min) / mean of the means."""
     cfg = results.config
@@ -231,6 +258,8 @@ def write_sweep_report(results: Results, out_dir: Path, figure: str) -> Path:
         f"{ok} of {len(results.runs)} runs succeeded in {elapsed_s:.1f} s. Base geometry: "
         f"{_geometry(cfg)}. Errors in cm (FL times the true |L1 L2|); bands are 10th-90th "
         "percentiles over runs.",
+        "",
+        sweep_table_markdown(results),
         "",
         f"![sweep]({figure})",
         "",

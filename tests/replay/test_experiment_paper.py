@@ -137,9 +137,15 @@ def test_tiny_sweep_end_to_end_is_quiet(tmp_path: Path) -> None:
     ]
     result = CliRunner().invoke(cli, args)
     assert result.exit_code == 0, result.output
-    # one summary line: no simulator output, no skipped-movement warnings from the runs
-    assert result.output.strip().splitlines() == [result.output.strip()]
-    assert result.output.startswith("4/4 runs ok")
+    # the summary table and one line: no simulator output, no skipped-movement warnings
+    *table, last = result.output.strip().splitlines()
+    assert last.startswith("4/4 runs ok")
+    assert table[0].startswith("Mean error (cm) over runs after 3 / 4 movements")
+    assert [line[:7] for line in table[2:] if not line.startswith("|-")] == [
+        "| n_l |",
+        "| 40 | ",
+        "| 80 | ",
+    ]
     res = read_results(out)
     assert sorted({r.group for r in res.runs}) == ["n_l=40", "n_l=80"]
     for value in (40, 80):
