@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.errors import BslamError
 from replay.experiments.geometry import scored_landmarks
 from replay.experiments.methods import (
     RunContext,
@@ -33,6 +34,10 @@ from replay.experiments.results import ErrorRow
 from replay.truth import truth_from_scenario
 
 _CONSOLE = threading.Lock()  # held while a simulation's console output is redirected
+
+
+class SimulationError(BslamError):
+    """A run's log cannot be simulated (e.g. no move of the asked length fits the arena)."""
 
 
 @dataclass(frozen=True)
@@ -117,18 +122,23 @@ def simulate(scenario: dict[str, Any], log: Path, *, seed: int) -> None:
     """Write the run's scenario beside the log and simulate it (``bslam simulate``, in process).
 
     Going through the command keeps to its contract (``--scenario``, ``--out``, ``--seed``)
-    without a new interpreter per run; a user error surfaces as ``click.ClickException``. The
+    without a new interpreter per run; a user error becomes a :class:`SimulationError`. The
     command's console output (its progress bar, its "wrote" line) would break the experiment's
     progress bar, so it is dropped: redirecting ``sys.stdout``/``sys.stderr`` is process-wide,
     hence the lock, which keeps threads of one Dask worker from interleaving redirections.
     """
+    import click
+
     from replay.cli import cli
 
     scenario_path = log.with_suffix(".scenario.json")
     scenario_path.write_text(json.dumps(scenario, indent=1) + "\n", encoding="utf-8")
     args = ["simulate", "--scenario", str(scenario_path), "--out", str(log), "--seed", str(seed)]
-    with _CONSOLE, redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
-        cli.main(args, prog_name="bslam", standalone_mode=False)
+    try:
+        with _CONSOLE, redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
+            cli.main(args, prog_name="bslam", standalone_mode=False)
+    except click.ClickException as exc:
+        raise SimulationError(f"cannot simulate {log.name}: {exc.message}") from None
 
 
 def true_keyframes(log: Path) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:

@@ -162,3 +162,18 @@ def test_tiny_sweep_end_to_end_is_quiet(tmp_path: Path) -> None:
     for table in tables:  # every value's table has numbers for the swept prior
         line = next(x for x in table.splitlines() if x.startswith("| impartial PDF |"))
         assert "nan" not in line and line.split("|")[2].strip()[0].isdigit(), line
+
+
+@needs_simulate
+def test_run_that_cannot_be_simulated_is_one_clear_error(tmp_path: Path) -> None:
+    from replay.experiments.experiment import plan_runs, scenario_doc
+    from replay.experiments.protocol import Protocol, apply_scenario_param
+    from replay.experiments.run import SimulationError, run_one
+
+    doc = apply_scenario_param(scenario_doc("paper"), "movement_length_m", 2.0)  # arena: 1 m
+    (task,) = plan_runs(Protocol(runs=1, movements=2), doc, tmp_path, "too_long")
+    with pytest.raises(SimulationError) as info:
+        run_one(task)
+    message = str(info.value)
+    assert message.startswith("cannot simulate run_000.mcap: move 0: ")
+    assert "trajectory.distance" in message and "\n" not in message
