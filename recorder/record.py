@@ -28,16 +28,16 @@ import signal
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from types import FrameType
-from typing import Any, Protocol
-
-import numpy as np
+from typing import Any
 
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import BslamError, LogError
 from data_schemas.stamps import stamp_from_ns
 from recorder.camera import Camera
 from recorder.clock import Clock
-from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message, png_params
+from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message
+from recorder.moves import Move
+from recorder.png import check_level
 from recorder.robot import Robot, drive, turn
 from recorder.writer import LogWriter
 
@@ -49,53 +49,35 @@ LOG_NAME = "bslam.recorder"
 GroundTruth = Callable[[], Sequence[float]]
 
 
-class MoveLike(Protocol):
-    """What the loop needs of a move (``Move`` here, or the simulator's planned moves)."""
-
-    @property
-    def turn_rad(self) -> float: ...
-
-    @property
-    def distance_m(self) -> float: ...
-
-
 @dataclass(frozen=True)
-class Move:
-    """One movement: turn in place by ``turn_rad`` (CCW), then drive ``distance_m`` straight."""
+class RecordSettings:
+    """How the loop captures and stores frames (the ``bslam record``/``simulate`` options).
 
-    turn_rad: float
-    distance_m: float
-
-
-def random_moves(
-    rng: np.random.Generator,
-    count: int | None,
-    distance_m: tuple[float, float],
-    turn_rad: float | None = None,
-) -> Iterator[Move]:
-    """Moves for a real robot: turn uniform in [-pi, pi) (or ``turn_rad``), distance uniform.
-
-    Parameters
+    Attributes
     ----------
-    rng : numpy.random.Generator
-        Source of the pseudo-random turns and distances.
-    count : int or None
-        Number of moves; None for endless (stop with Ctrl-C).
-    distance_m : (float, float)
-        Range of the straight distance, metres (equal bounds for a fixed distance).
-    turn_rad : float, optional
-        Fixed turn instead of a random one.
+    frame_rate_hz : float
+        Frames per second captured while driving (keyframes come in addition).
+    encoding : {"png", "bgr8"}
+        Frame storage; see :mod:`recorder.frames`.
+    png_level : int
+        PNG level 0..3 (see :mod:`recorder.png`; ignored for ``bgr8``).
+    poll_s : float
+        Motion-status polling period, seconds (also the signal-check period).
     """
-    lo, hi = distance_m
-    if not 0 < lo <= hi:
-        raise ValueError(f"distance range must satisfy 0 < lo <= hi, got {distance_m}")
-    i = 0
-    while count is None or i < count:
-        angle = (
-            turn_rad if turn_rad is not None else wrap_rad(float(rng.uniform(-math.pi, math.pi)))
-        )
-        yield Move(angle, float(rng.uniform(lo, hi)) if hi > lo else lo)
-        i += 1
+
+    frame_rate_hz: float = 5.0
+    encoding: Encoding = "png"
+    png_level: int = 1
+    poll_s: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not self.frame_rate_hz > 0:
+            raise ValueError(f"frame rate must be > 0 Hz, got {self.frame_rate_hz}")
+        if self.encoding not in IMAGE_SCHEMA:
+            raise ValueError(f"encoding must be one of {sorted(IMAGE_SCHEMA)}, got {self.encoding}")
+        check_level(self.png_level)
+        if not self.poll_s > 0:
+            raise ValueError(f"poll period must be > 0 s, got {self.poll_s}")
 
 
 @dataclass(frozen=True)
@@ -195,9 +177,7 @@ class _Recorder:
     camera: Camera
     writer: LogWriter
     clock: Clock
-    frame_period_ns: int
-    encoding: Encoding
-    png: list[int]
+    settings: RecordSettings
     ground_truth: GroundTruth | None
     frames: int = 0
     last_frame_ns: int | None = None
@@ -221,8 +201,9 @@ class _Recorder:
         _FLAG.check()
         t_ns = self.clock.monotonic_ns()
         image = self.camera.read()
-        msg = frame_message(image, t_ns, encoding=self.encoding, params=self.png)
-        self.writer.write("/camera/panorama", msg, schema=IMAGE_SCHEMA[self.encoding])
+        encoding = self.settings.encoding
+        msg = frame_message(image, t_ns, encoding=encoding, png_level=self.settings.png_level)
+        self.writer.write("/camera/panorama", msg, schema=IMAGE_SCHEMA[encoding])
         if self.ground_truth is not None:
             x, y, heading = self.ground_truth()
             self.writer.write(
@@ -242,10 +223,11 @@ class _Recorder:
         """``on_poll`` while driving: a frame every ``frame_period_ns``."""
         _FLAG.check()
         now = self.clock.monotonic_ns()
-        if self.last_frame_ns is None or now - self.last_frame_ns >= self.frame_period_ns:
+        period_ns = round(1e9 / self.settings.frame_rate_hz)
+        if self.last_frame_ns is None or now - self.last_frame_ns >= period_ns:
             self.frame()
 
-    def keyframe(self, index: int, phase: str, move: MoveLike) -> None:
+    def keyframe(self, index: int, phase: str, move: Move) -> None:
         """At rest: keyframe, odometry, and the movement message pointing at the keyframe."""
         self.robot.stop()
         t_key = self.frame()
@@ -280,11 +262,8 @@ def record_session(
     camera: Camera,
     writer: LogWriter,
     clock: Clock,
-    moves: Iterable[MoveLike],
-    frame_rate_hz: float = 5.0,
-    encoding: Encoding = "png",
-    png_level: int = 1,
-    poll_s: float = 0.05,
+    moves: Iterable[Move],
+    settings: RecordSettings,
     ground_truth: GroundTruth | None = None,
     progress: Callable[[Progress], None] | None = None,
 ) -> RecordResult:
@@ -302,14 +281,8 @@ def record_session(
         The session clock (the writer's and the robot's).
     moves : iterable of Move
         The plan; pulled one at a time (a simulator may plan from the true pose).
-    frame_rate_hz : float
-        Frames per second captured while driving (keyframes come in addition).
-    encoding : {"png", "bgr8"}
-        Frame storage; see :mod:`recorder.frames`.
-    png_level : int
-        PNG compression 0..9 (see :mod:`recorder.frames`).
-    poll_s : float
-        Motion-status polling period, seconds (also the signal-check period).
+    settings : RecordSettings
+        Frame rate, encoding, PNG level, polling period.
     ground_truth : callable, optional
         Simulation only: the true pose now; written with every frame.
     progress : callable, optional
@@ -322,19 +295,8 @@ def record_session(
     BslamError
         Robot, camera or disk fault; logged to ``/log`` when possible, motors stopped.
     """
-    if frame_rate_hz <= 0:
-        raise ValueError(f"frame rate must be > 0 Hz, got {frame_rate_hz}")
-    rec = _Recorder(
-        robot=robot,
-        camera=camera,
-        writer=writer,
-        clock=clock,
-        frame_period_ns=round(1e9 / frame_rate_hz),
-        encoding=encoding,
-        png=png_params(png_level),
-        ground_truth=ground_truth,
-    )
-    poll = min(poll_s, 1.0 / frame_rate_hz)
+    rec = _Recorder(robot, camera, writer, clock, settings, ground_truth)
+    poll = min(settings.poll_s, 1.0 / settings.frame_rate_hz)
     config = robot.config
     done = 0
     try:
@@ -381,8 +343,13 @@ def record_to_file(
     session_doc: dict[str, Any],
     *,
     sink: CommandSink,
-    writer_options: dict[str, Any] | None = None,
-    **loop: Any,
+    robot: Robot,
+    camera: Camera,
+    clock: Clock,
+    moves: Iterable[Move],
+    settings: RecordSettings,
+    ground_truth: GroundTruth | None = None,
+    progress: Callable[[Progress], None] | None = None,
 ) -> RecordResult:
     """Create the log, attach the robot's ``sink``, run :func:`record_session`, finish the log.
 
@@ -398,14 +365,18 @@ def record_to_file(
         Session document (:func:`recorder.session.build_session_doc`).
     sink : CommandSink
         The ``on_exchange`` the robot was opened with.
-    writer_options : dict, optional
-        Extra keyword arguments of :class:`LogWriter` (chunking, compression, fsync).
-    **loop
-        Keyword arguments of :func:`record_session` (``robot``, ``camera``, ``clock``, ...).
+    robot, camera, clock, moves, settings, ground_truth, progress
+        As for :func:`record_session`.
     """
-    with (
-        stop_on_signals(),
-        LogWriter(out, session_doc, clock=loop["clock"], **(writer_options or {})) as writer,
-    ):
+    with stop_on_signals(), LogWriter(out, session_doc, clock=clock) as writer:
         sink.attach(writer)
-        return record_session(writer=writer, **loop)
+        return record_session(
+            robot=robot,
+            camera=camera,
+            writer=writer,
+            clock=clock,
+            moves=moves,
+            settings=settings,
+            ground_truth=ground_truth,
+            progress=progress,
+        )

@@ -5,9 +5,16 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
+
+if TYPE_CHECKING:
+    from recorder.camera import Camera
+    from recorder.clock import Clock
+    from recorder.moves import Move
+    from recorder.record import CommandSink, GroundTruth, RecordSettings
+    from recorder.robot import Robot
 
 
 def run_recording(
@@ -15,13 +22,19 @@ def run_recording(
     session_doc: dict[str, Any],
     *,
     total: int | None,
-    moves: Iterable[Any],
-    **loop: Any,
+    sink: CommandSink,
+    robot: Robot,
+    camera: Camera,
+    clock: Clock,
+    moves: Iterable[Move],
+    settings: RecordSettings,
+    ground_truth: GroundTruth | None = None,
 ) -> None:
     """Record into ``out`` with a progress bar on stderr; report the result on stdout.
 
-    A stop request (SIGINT/SIGTERM) finishes the log and exits with 128 + the signal number.
-    Keyword arguments are those of :func:`recorder.record.record_to_file`.
+    ``total`` is the number of moves for the bar (None: unknown); the other arguments are
+    those of :func:`recorder.record.record_to_file`. A stop request (SIGINT/SIGTERM) finishes
+    the log and exits with 128 + the signal number.
     """
     from tqdm import tqdm
 
@@ -34,7 +47,18 @@ def run_recording(
             bar.set_postfix(frames=p.frames)
 
         try:
-            result = record_to_file(out, session_doc, moves=moves, progress=progress, **loop)
+            result = record_to_file(
+                out,
+                session_doc,
+                sink=sink,
+                robot=robot,
+                camera=camera,
+                clock=clock,
+                moves=moves,
+                settings=settings,
+                ground_truth=ground_truth,
+                progress=progress,
+            )
         except RecordingInterrupted as exc:
             bar.close()
             click.echo(f"{exc}; {os.fspath(out)} is finished and indexed", err=True)

@@ -23,7 +23,7 @@ import click
     help="Frames per second while driving (virtual time).",
 )
 @click.option(
-    "--png-level", type=click.IntRange(0, 9), default=1, show_default=True, help="PNG level."
+    "--png-level", type=click.IntRange(0, 3), default=1, show_default=True, help="PNG level."
 )
 @click.option(
     "--turn-noise",
@@ -58,7 +58,7 @@ def simulate(
 
     from data_schemas.session import LandmarkSpec
     from recorder.clock import VirtualClock
-    from recorder.record import CommandSink
+    from recorder.record import CommandSink, RecordSettings
     from recorder.robot import KheperaRobot, RobotConfig
     from recorder.session import build_session_doc
     from recorder.sim.camera import SimCamera
@@ -121,8 +121,6 @@ def simulate(
                 robot=robot,
                 camera=camera,
                 clock=clock,
-                frame_rate_hz=frame_rate_hz,
-                encoding="png",
-                png_level=png_level,
+                settings=RecordSettings(frame_rate_hz=frame_rate_hz, png_level=png_level),
                 ground_truth=fake.pose_world,
             )

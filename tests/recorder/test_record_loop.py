@@ -21,12 +21,12 @@ from data_schemas.stamps import ns_from_stamp
 from recorder.camera import CameraEndOfStream, OpenCVCamera
 from recorder.clock import VirtualClock
 from recorder.logread import LogMessage, LogReader
+from recorder.moves import Move, random_moves
 from recorder.record import (
     CommandSink,
-    Move,
     Progress,
     RecordingInterrupted,
-    random_moves,
+    RecordSettings,
     record_session,
     stop_on_signals,
 )
@@ -37,6 +37,7 @@ from recorder.writer import LogWriter
 from tests.recorder.samples import make_session_doc
 
 CAL = UnwrappedCalibration(32, 16)
+TEN_HZ = RecordSettings(frame_rate_hz=10.0)
 
 
 class _StillCamera:
@@ -63,6 +64,7 @@ def _run(
     camera: Any = None,
     fault: dict[str, Any] | None = None,
     progress: Any = None,
+    settings: RecordSettings = TEN_HZ,
 ) -> tuple[FakeKhepera, Any]:
     base = VirtualClock()
     clock = EpochClock(base)
@@ -83,7 +85,7 @@ def _run(
                     writer=writer,
                     clock=clock,
                     moves=moves,
-                    frame_rate_hz=10.0,
+                    settings=settings,
                     ground_truth=fake.pose_world,
                     progress=progress,
                 )
