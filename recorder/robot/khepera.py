@@ -25,7 +25,7 @@ import errno
 import sys
 from collections.abc import Callable
 from types import TracebackType
-from typing import Any
+from typing import Any, Protocol, cast
 
 import serial
 
@@ -76,7 +76,19 @@ def _port_error(port: str, exc: Exception) -> SerialPortError:
     return SerialPortError(f"cannot open serial port {port} ({exc}); check the port name")
 
 
-def open_serial(config: RobotConfig) -> serial.SerialBase:
+class SerialPort(Protocol):
+    """What the driver needs of a pyserial port (``serial.Serial`` or a URL handler's class)."""
+
+    timeout: float | None
+
+    def write(self, data: bytes, /) -> int | None: ...
+    def read(self, size: int = 1, /) -> bytes: ...
+    def read_until(self, expected: bytes = ..., size: int | None = ...) -> bytes: ...
+    def reset_input_buffer(self) -> None: ...
+    def close(self) -> None: ...
+
+
+def open_serial(config: RobotConfig) -> SerialPort:
     """Open ``config.port`` (device path or pyserial URL) exclusively, 8N2, with timeouts.
 
     Raises
@@ -103,7 +115,7 @@ def open_serial(config: RobotConfig) -> serial.SerialBase:
         raise SerialPortError(
             f"cannot use serial port {config.port} ({exc}); check the port name and settings"
         ) from None
-    return port
+    return cast(SerialPort, port)
 
 
 class KheperaRobot:
@@ -111,7 +123,7 @@ class KheperaRobot:
 
     Parameters
     ----------
-    port : serial.SerialBase
+    port : SerialPort
         Open port (see :func:`open_serial`); the robot owns and closes it.
     config : RobotConfig
         Settings (retries, timeouts, geometry).
@@ -123,7 +135,7 @@ class KheperaRobot:
 
     def __init__(
         self,
-        port: serial.SerialBase,
+        port: SerialPort,
         config: RobotConfig,
         clock: Clock,
         on_exchange: OnExchange | None = None,
