@@ -39,11 +39,13 @@ from mcap.records import (
     SummaryOffset,
 )
 
+#: The bytes that open and close every MCAP file.
 MAGIC = bytes([137, 77, 67, 65, 80, 48, 13, 10])
-_RECORD_HEADER = struct.Struct("<BQ")
+#: Every record starts with its opcode and the length of its body.
+RECORD_HEADER = struct.Struct("<BQ")
 #: Message record up to its data: opcode, length, channel id, sequence, log and publish time.
 _MESSAGE_HEADER = struct.Struct("<BQHIQQ")
-_MESSAGE_FIELDS = _MESSAGE_HEADER.size - _RECORD_HEADER.size
+_MESSAGE_FIELDS = _MESSAGE_HEADER.size - RECORD_HEADER.size
 #: Chunk record up to its records: start/end time, uncompressed size and CRC, compression
 #: (empty string: stored), records length.
 _CHUNK_HEADER = struct.Struct("<BQQQQIIQ")
@@ -132,14 +134,20 @@ class McapChunkWriter:
         self._chunk.add([serialise(schema)])
         return schema.id
 
-    def add_channel(self, topic: str, message_encoding: str, schema_id: int) -> int:
+    def add_channel(
+        self,
+        topic: str,
+        message_encoding: str,
+        schema_id: int,
+        metadata: dict[str, str] | None = None,
+    ) -> int:
         """Register a channel (written into the open chunk); return its id."""
         channel = Channel(
             id=len(self._channels) + 1,
             topic=topic,
             message_encoding=message_encoding,
             schema_id=schema_id,
-            metadata={},
+            metadata=metadata or {},
         )
         self._channels.append(channel)
         self._counts[channel.id] = 0
@@ -172,7 +180,7 @@ class McapChunkWriter:
         chunk.messages += 1
         chunk.index.setdefault(channel_id, []).append((log_time_ns, offset))
         self._counts[channel_id] += 1
-        return _RECORD_HEADER.size + length
+        return RECORD_HEADER.size + length
 
     def close_chunk(self) -> bool:
         """Write the open chunk and its message indexes, flush the stream; False if empty.
@@ -191,7 +199,7 @@ class McapChunkWriter:
         chunk_offset = self._stream.tell()
         head = _CHUNK_HEADER.pack(
             Opcode.CHUNK,
-            _CHUNK_HEADER.size - _RECORD_HEADER.size + chunk.size,
+            _CHUNK_HEADER.size - RECORD_HEADER.size + chunk.size,
             chunk.start_ns,
             chunk.end_ns,
             chunk.size,

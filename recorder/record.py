@@ -171,14 +171,36 @@ class CommandSink:
         self._writer.write("/robot/command", msg)
 
 
+@dataclass(frozen=True)
+class Rig:
+    """What a session records from.
+
+    Attributes
+    ----------
+    robot : Robot
+        Open robot whose ``on_exchange`` is ``sink``.
+    sink : CommandSink
+        Writes the robot's ``/robot/command`` messages once the log exists.
+    camera : Camera
+        Frame source; its calibration is in the session document.
+    clock : Clock
+        The session clock (the writer's and the robot's).
+    ground_truth : callable, optional
+        Simulation only: the true pose now; written with every frame.
+    """
+
+    robot: Robot
+    sink: CommandSink
+    camera: Camera
+    clock: Clock
+    ground_truth: GroundTruth | None = None
+
+
 @dataclass
 class _Recorder:
-    robot: Robot
-    camera: Camera
+    rig: Rig
     writer: LogWriter
-    clock: Clock
     settings: RecordSettings
-    ground_truth: GroundTruth | None
     frames: int = 0
     last_frame_ns: int | None = None
 
@@ -187,7 +209,7 @@ class _Recorder:
         self.writer.write(
             "/log",
             {
-                "timestamp": stamp_from_ns(self.clock.monotonic_ns()),
+                "timestamp": stamp_from_ns(self.rig.clock.monotonic_ns()),
                 "level": level,
                 "message": text,
                 "name": LOG_NAME,
@@ -199,13 +221,13 @@ class _Recorder:
     def frame(self) -> int:
         """Capture, write a frame (and the true pose in simulation); return its time stamp."""
         _FLAG.check()
-        t_ns = self.clock.monotonic_ns()
-        image = self.camera.read()
+        t_ns = self.rig.clock.monotonic_ns()
+        image = self.rig.camera.read()
         encoding = self.settings.encoding
         msg = frame_message(image, t_ns, encoding=encoding, png_level=self.settings.png_level)
         self.writer.write("/camera/panorama", msg, schema=IMAGE_SCHEMA[encoding])
-        if self.ground_truth is not None:
-            x, y, heading = self.ground_truth()
+        if self.rig.ground_truth is not None:
+            x, y, heading = self.rig.ground_truth()
             self.writer.write(
                 "/sim/ground_truth",
                 {
@@ -222,25 +244,25 @@ class _Recorder:
     def frame_if_due(self) -> None:
         """``on_poll`` while driving: a frame every ``frame_period_ns``."""
         _FLAG.check()
-        now = self.clock.monotonic_ns()
+        now = self.rig.clock.monotonic_ns()
         period_ns = round(1e9 / self.settings.frame_rate_hz)
         if self.last_frame_ns is None or now - self.last_frame_ns >= period_ns:
             self.frame()
 
     def keyframe(self, index: int, phase: str, move: Move) -> None:
         """At rest: keyframe, odometry, and the movement message pointing at the keyframe."""
-        self.robot.stop()
+        robot = self.rig.robot
+        robot.stop()
         t_key = self.frame()
-        left, right = self.robot.read_position_counters()
-        config = self.robot.config
-        now = stamp_from_ns(self.clock.monotonic_ns())
+        left, right = robot.read_position_counters()
+        now = stamp_from_ns(self.rig.clock.monotonic_ns())
         self.writer.write(
             "/robot/odometry",
             {
                 "timestamp": now,
                 "left_pulses": left,
                 "right_pulses": right,
-                "mm_per_pulse": config.mm_per_pulse,
+                "mm_per_pulse": robot.config.mm_per_pulse,
             },
         )
         self.writer.write(
@@ -257,34 +279,25 @@ class _Recorder:
 
 
 def record_session(
-    *,
-    robot: Robot,
-    camera: Camera,
+    rig: Rig,
     writer: LogWriter,
-    clock: Clock,
     moves: Iterable[Move],
     settings: RecordSettings,
-    ground_truth: GroundTruth | None = None,
+    *,
     progress: Callable[[Progress], None] | None = None,
 ) -> RecordResult:
     """Run the movement plan and record everything into ``writer``.
 
     Parameters
     ----------
-    robot : Robot
-        Open robot whose ``on_exchange`` writes ``/robot/command`` (see :class:`CommandSink`).
-    camera : Camera
-        Frame source; its calibration is in the session document.
+    rig : Rig
+        Robot, command sink (attached to ``writer`` here), camera, clock, ground truth.
     writer : LogWriter
         Open log; the caller finishes it (``with LogWriter(...)``), also after an error.
-    clock : Clock
-        The session clock (the writer's and the robot's).
     moves : iterable of Move
         The plan; pulled one at a time (a simulator may plan from the true pose).
     settings : RecordSettings
         Frame rate, encoding, PNG level, polling period.
-    ground_truth : callable, optional
-        Simulation only: the true pose now; written with every frame.
     progress : callable, optional
         Called with :class:`Progress` after each movement.
 
@@ -295,9 +308,10 @@ def record_session(
     BslamError
         Robot, camera or disk fault; logged to ``/log`` when possible, motors stopped.
     """
-    rec = _Recorder(robot, camera, writer, clock, settings, ground_truth)
+    rig.sink.attach(writer)
+    rec = _Recorder(rig, writer, settings)
     poll = min(settings.poll_s, 1.0 / settings.frame_rate_hz)
-    config = robot.config
+    robot, clock, config = rig.robot, rig.clock, rig.robot.config
     done = 0
     try:
         rec.log(INFO, f"session started: robot {config.model} on {config.port}")
@@ -335,48 +349,25 @@ def _stop_after(rec: _Recorder, level: int, text: str) -> None:
         with contextlib.suppress(LogError):
             rec.log(level, text)
     with contextlib.suppress(BslamError):
-        rec.robot.stop()
+        rec.rig.robot.stop()
 
 
 def record_to_file(
     out: str | os.PathLike[str],
     session_doc: dict[str, Any],
-    *,
-    sink: CommandSink,
-    robot: Robot,
-    camera: Camera,
-    clock: Clock,
+    rig: Rig,
     moves: Iterable[Move],
     settings: RecordSettings,
-    ground_truth: GroundTruth | None = None,
+    *,
     progress: Callable[[Progress], None] | None = None,
 ) -> RecordResult:
-    """Create the log, attach the robot's ``sink``, run :func:`record_session`, finish the log.
+    """Create the log ``out``, run :func:`record_session` into it, finish the log.
 
     The one code path of ``bslam record`` and ``bslam simulate``. SIGINT/SIGTERM are handled
     (see :func:`stop_on_signals`) from before the log exists until it is finished, so a stop
-    request always leaves an indexed file.
-
-    Parameters
-    ----------
-    out : path
-        Log to write.
-    session_doc : dict
-        Session document (:func:`recorder.session.build_session_doc`).
-    sink : CommandSink
-        The ``on_exchange`` the robot was opened with.
-    robot, camera, clock, moves, settings, ground_truth, progress
-        As for :func:`record_session`.
+    request always leaves an indexed file. ``session_doc`` is the session document
+    (:func:`recorder.session.build_session_doc`); the other arguments are those of
+    :func:`record_session`.
     """
-    with stop_on_signals(), LogWriter(out, session_doc, clock=clock) as writer:
-        sink.attach(writer)
-        return record_session(
-            robot=robot,
-            camera=camera,
-            writer=writer,
-            clock=clock,
-            moves=moves,
-            settings=settings,
-            ground_truth=ground_truth,
-            progress=progress,
-        )
+    with stop_on_signals(), LogWriter(out, session_doc, clock=rig.clock) as writer:
+        return record_session(rig, writer, moves, settings, progress=progress)

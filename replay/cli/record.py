@@ -112,7 +112,7 @@ def record(
     from recorder.camera import OpenCVCamera
     from recorder.clock import SystemClock
     from recorder.moves import random_moves
-    from recorder.record import CommandSink, RecordSettings
+    from recorder.record import CommandSink, RecordSettings, Rig
     from recorder.robot import KheperaRobot, RobotConfig
     from recorder.session import build_session_doc, load_calibration_file, load_landmark_file
     from recorder.timebase import EpochClock
@@ -149,16 +149,7 @@ def record(
             )
             turn_rad = None if turn_deg is None else math.radians(turn_deg)
             plan = random_moves(np.random.default_rng(seed), moves or None, distance_m, turn_rad)
-            run_recording(
-                out,
-                doc,
-                sink=sink,
-                robot=robot,
-                camera=camera,
-                clock=clock,
-                moves=plan,
-                total=moves or None,
-                settings=settings,
-            )
+            rig = Rig(robot=robot, sink=sink, camera=camera, clock=clock)
+            run_recording(out, doc, rig, plan, settings, total=moves or None)
     finally:
         camera.close()

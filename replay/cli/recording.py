@@ -10,25 +10,18 @@ from typing import TYPE_CHECKING, Any
 import click
 
 if TYPE_CHECKING:
-    from recorder.camera import Camera
-    from recorder.clock import Clock
     from recorder.moves import Move
-    from recorder.record import CommandSink, GroundTruth, RecordSettings
-    from recorder.robot import Robot
+    from recorder.record import RecordSettings, Rig
 
 
 def run_recording(
     out: str | os.PathLike[str],
     session_doc: dict[str, Any],
-    *,
-    total: int | None,
-    sink: CommandSink,
-    robot: Robot,
-    camera: Camera,
-    clock: Clock,
+    rig: Rig,
     moves: Iterable[Move],
     settings: RecordSettings,
-    ground_truth: GroundTruth | None = None,
+    *,
+    total: int | None,
 ) -> None:
     """Record into ``out`` with a progress bar on stderr; report the result on stdout.
 
@@ -47,18 +40,7 @@ def run_recording(
             bar.set_postfix(frames=p.frames)
 
         try:
-            result = record_to_file(
-                out,
-                session_doc,
-                sink=sink,
-                robot=robot,
-                camera=camera,
-                clock=clock,
-                moves=moves,
-                settings=settings,
-                ground_truth=ground_truth,
-                progress=progress,
-            )
+            result = record_to_file(out, session_doc, rig, moves, settings, progress=progress)
         except RecordingInterrupted as exc:
             bar.close()
             click.echo(f"{exc}; {os.fspath(out)} is finished and indexed", err=True)

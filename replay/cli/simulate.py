@@ -58,7 +58,7 @@ def simulate(
 
     from data_schemas.session import LandmarkSpec
     from recorder.clock import VirtualClock
-    from recorder.record import CommandSink, RecordSettings
+    from recorder.record import CommandSink, RecordSettings, Rig
     from recorder.robot import KheperaRobot, RobotConfig
     from recorder.session import build_session_doc
     from recorder.sim.camera import SimCamera
@@ -112,15 +112,6 @@ def simulate(
                     },
                 },
             )
-            run_recording(
-                out,
-                doc,
-                total=len(planner),
-                moves=planner,
-                sink=sink,
-                robot=robot,
-                camera=camera,
-                clock=clock,
-                settings=RecordSettings(frame_rate_hz=frame_rate_hz, png_level=png_level),
-                ground_truth=fake.pose_world,
-            )
+            rig = Rig(robot, sink, camera, clock, ground_truth=fake.pose_world)
+            settings = RecordSettings(frame_rate_hz=frame_rate_hz, png_level=png_level)
+            run_recording(out, doc, rig, planner, settings, total=len(planner))

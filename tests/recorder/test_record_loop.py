@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import math
 import os
 import signal
@@ -27,6 +28,7 @@ from recorder.record import (
     Progress,
     RecordingInterrupted,
     RecordSettings,
+    Rig,
     record_session,
     stop_on_signals,
 )
@@ -77,18 +79,9 @@ def _run(
         config = RobotConfig(port=server.path, reply_timeout_s=0.2, retries=1)
         with KheperaRobot.open(config, clock, on_exchange=sink) as robot:
             robot.version()  # answered before the log exists: held by the sink
+            rig = Rig(robot, sink, camera, clock, ground_truth=fake.pose_world)
             with LogWriter(path, make_session_doc(), clock=clock) as writer:
-                sink.attach(writer)
-                result = record_session(
-                    robot=robot,
-                    camera=camera,
-                    writer=writer,
-                    clock=clock,
-                    moves=moves,
-                    settings=settings,
-                    ground_truth=fake.pose_world,
-                    progress=progress,
-                )
+                result = record_session(rig, writer, moves, settings, progress=progress)
     return fake, result
 
 
@@ -215,3 +208,41 @@ def test_random_moves() -> None:
     assert fixed == [Move(0.5, 0.2)] * 3
     endless: Iterator[Move] = random_moves(np.random.default_rng(0), None, (0.1, 0.2))
     assert len([next(endless) for _ in range(1000)]) == 1000
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        RecordSettings(frame_rate_hz=10.0, encoding="png", png_level=0),
+        RecordSettings(frame_rate_hz=10.0, encoding="png", png_level=3),
+        RecordSettings(frame_rate_hz=10.0, encoding="bgr8"),
+    ],
+)
+def test_frames_are_stored_losslessly(tmp_path: Path, settings: RecordSettings) -> None:
+    path = tmp_path / "s.mcap"
+    camera = _StillCamera()
+    _run(path, [Move(0.2, 0.05)], camera=camera, settings=settings)
+    frames = [m for m in _read(path) if m.topic == "/camera/panorama"]
+    assert len(frames) == camera.reads >= 2
+    for m in frames:
+        msg = m.decode()
+        validate(m.schema, msg, what=m.topic)
+        data = np.frombuffer(base64.b64decode(msg["data"]), np.uint8)
+        if settings.encoding == "png":
+            assert m.schema == "foxglove.CompressedImage" and msg["format"] == "png"
+            image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        else:
+            assert m.schema == "foxglove.RawImage" and msg["step"] == 3 * msg["width"]
+            image = data.reshape(msg["height"], msg["width"], 3)
+        assert np.array_equal(image, camera.image)
+
+
+def test_record_settings_are_checked() -> None:
+    with pytest.raises(ValueError, match="frame rate must be > 0 Hz"):
+        RecordSettings(frame_rate_hz=0.0)
+    with pytest.raises(ValueError, match="encoding must be one of"):
+        RecordSettings(encoding="jpeg")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"PNG level must be 0\.\.3"):
+        RecordSettings(png_level=9)
+    with pytest.raises(ValueError, match="poll period"):
+        RecordSettings(poll_s=0.0)
