@@ -75,7 +75,13 @@ def _distance_range(text: str) -> tuple[float, float]:
     show_default=True,
     help="PNG compression: 0 stored (fastest), 1 fast (half size), up to 3.",
 )
-@click.option("--baud", type=int, default=9600, show_default=True, help="Serial baud rate.")
+@click.option(
+    "--baud",
+    type=int,
+    default=9600,
+    show_default=True,
+    help="Serial baud rate of the robot's running mode (Khepera II: 9600 to 115200).",
+)
 @click.option(
     "--model", default="khepera2", show_default=True, help="Robot model name (for the log)."
 )
