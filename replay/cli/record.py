@@ -118,7 +118,7 @@ def record(
     from recorder.camera import OpenCVCamera
     from recorder.clock import SystemClock
     from recorder.moves import random_moves
-    from recorder.record import CommandSink, RecordSettings, Rig
+    from recorder.record import CommandSink, RecordSettings, Rig, record_to_file
     from recorder.robot import KheperaRobot, RobotConfig
     from recorder.session import build_session_doc, load_calibration_file, load_landmark_file
     from recorder.timebase import EpochClock
@@ -156,6 +156,10 @@ def record(
             turn_rad = None if turn_deg is None else math.radians(turn_deg)
             plan = random_moves(np.random.default_rng(seed), moves or None, distance_m, turn_rad)
             rig = Rig(robot=robot, sink=sink, camera=camera, clock=clock)
-            run_recording(out, doc, rig, plan, settings, total=moves or None)
+            run_recording(
+                out,
+                lambda progress: record_to_file(out, doc, rig, plan, settings, progress=progress),
+                total=moves or None,
+            )
     finally:
         camera.close()
