@@ -24,15 +24,16 @@ import click
     help="Seed of the simulated trajectory and of the estimator.",
 )
 @click.option("--omni", is_flag=True, help="Use the omnidirectional (donut) camera model.")
-@click.pass_context
-def demo(ctx: click.Context, out_dir: Path, seed: int, omni: bool) -> None:
+def demo(out_dir: Path, seed: int, omni: bool) -> None:
     """Simulate the paper's arena (10 movements), build the map, write demo.rrd.
 
     Writes the simulated log, the derived log, the summary JSON and a Rerun recording of every
     stage into --out, then says how to open them.
     """
+    from recorder.sim.scenario import builtin_scenario
+    from recorder.sim.simulate import simulate_to_file
     from replay.cli.process import show_skips
-    from replay.cli.simulate import simulate
+    from replay.cli.recording import run_recording
     from replay.process import result_line
     from replay.records import MethodConfig
     from replay.rerun_out import save_rrd
@@ -41,7 +42,12 @@ def demo(ctx: click.Context, out_dir: Path, seed: int, omni: bool) -> None:
     log = out_dir / "demo.mcap"
     scenario = "paper_omni" if omni else "paper"
     click.echo(f"simulating the paper's arena ({scenario}, seed {seed}) ...")
-    ctx.invoke(simulate, scenario_arg=scenario, out=str(log), seed=seed)
+    sim = builtin_scenario(scenario).with_seed(seed)
+    run_recording(
+        log,
+        lambda progress: simulate_to_file(sim, log, source=scenario, progress=progress),
+        total=sim.trajectory.n_moves,
+    )
     rrd, derived, summary = (
         out_dir / "demo.rrd",
         out_dir / "demo.derived.mcap",
