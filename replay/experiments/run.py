@@ -6,12 +6,9 @@ summary stay on disk (``run_000.mcap``, ``run_000.summary.json``) for ``bslam re
 
 from __future__ import annotations
 
-import io
 import json
 import math
-import threading
 import time
-from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,7 +16,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from data_schemas.errors import BslamError
 from replay.experiments.geometry import scored_landmarks
 from replay.experiments.methods import (
     RunContext,
@@ -32,12 +28,6 @@ from replay.experiments.methods import (
 from replay.experiments.protocol import Protocol
 from replay.experiments.results import ErrorRow
 from replay.truth import truth_from_scenario
-
-_CONSOLE = threading.Lock()  # held while a simulation's console output is redirected
-
-
-class SimulationError(BslamError):
-    """A run's log cannot be simulated (e.g. no move of the asked length fits the arena)."""
 
 
 @dataclass(frozen=True)
@@ -119,26 +109,19 @@ def run_one(task: RunTask) -> RunOutput:
 
 
 def simulate(scenario: dict[str, Any], log: Path, *, seed: int) -> None:
-    """Write the run's scenario beside the log and simulate it (``bslam simulate``, in process).
+    """Simulate the run's scenario into ``log`` (the library call behind ``bslam simulate``).
 
-    Going through the command keeps to its contract (``--scenario``, ``--out``, ``--seed``)
-    without a new interpreter per run; a user error becomes a :class:`SimulationError`. The
-    command's console output (its progress bar, its "wrote" line) would break the experiment's
-    progress bar, so it is dropped: redirecting ``sys.stdout``/``sys.stderr`` is process-wide,
-    hence the lock, which keeps threads of one Dask worker from interleaving redirections.
+    The scenario is written beside the log (``run_000.scenario.json``), so that the run can be
+    simulated again with ``bslam simulate --scenario ... --seed``. A scenario that cannot be
+    driven raises the simulator's one-line :class:`~data_schemas.errors.BslamError`.
     """
-    import click
-
-    from replay.cli import cli
+    from recorder.sim.scenario import scenario_from_dict
+    from recorder.sim.simulate import simulate_to_file
 
     scenario_path = log.with_suffix(".scenario.json")
     scenario_path.write_text(json.dumps(scenario, indent=1) + "\n", encoding="utf-8")
-    args = ["simulate", "--scenario", str(scenario_path), "--out", str(log), "--seed", str(seed)]
-    try:
-        with _CONSOLE, redirect_stdout(io.StringIO()), redirect_stderr(io.StringIO()):
-            cli.main(args, prog_name="bslam", standalone_mode=False)
-    except click.ClickException as exc:
-        raise SimulationError(f"cannot simulate {log.name}: {exc.message}") from None
+    sim = scenario_from_dict(scenario, what=scenario_path.name).with_seed(seed)
+    simulate_to_file(sim, log, source=scenario_path.name)
 
 
 def true_keyframes(log: Path) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:

@@ -165,15 +165,15 @@ def test_tiny_sweep_end_to_end_is_quiet(tmp_path: Path) -> None:
 
 
 @needs_simulate
-def test_run_that_cannot_be_simulated_is_one_clear_error(tmp_path: Path) -> None:
+def test_run_that_cannot_be_simulated_is_reported_in_one_line(tmp_path: Path) -> None:
     from replay.experiments.experiment import plan_runs, scenario_doc
     from replay.experiments.protocol import Protocol, apply_scenario_param
-    from replay.experiments.run import SimulationError, run_one
+    from replay.experiments.run import run_one
+    from replay.parallel import run_tasks
 
     doc = apply_scenario_param(scenario_doc("paper"), "movement_length_m", 2.0)  # arena: 1 m
     (task,) = plan_runs(Protocol(runs=1, movements=2), doc, tmp_path, "too_long")
-    with pytest.raises(SimulationError) as info:
-        run_one(task)
-    message = str(info.value)
-    assert message.startswith("cannot simulate run_000.mcap: move 0: ")
-    assert "trajectory.distance" in message and "\n" not in message
+    (outcome,) = run_tasks(run_one, [task], progress=False)
+    assert not outcome.ok and outcome.error is not None
+    assert outcome.error.startswith("move 0: no turn and distance in [1.6, 2.4] m")
+    assert "trajectory.distance" in outcome.error and "\n" not in outcome.error
