@@ -57,6 +57,23 @@ _TOPIC_LIST = [
         "bslam.GroundTruth",
         "simulation only: true robot pose x, y, heading (m, rad, world frame)",
     ),
+    # Derived logs (`bslam process --out`): the pipeline's stages as channels.
+    Topic("/pipeline/bearings", "bslam.Bearings", "derived: landmark bearings of one frame"),
+    Topic(
+        "/pipeline/particles_fr",
+        "bslam.ParticlesFR",
+        "derived: one movement's cones and landmark particles in the robot frame FR",
+    ),
+    Topic(
+        "/pipeline/particles_fl",
+        "bslam.ParticlesFL",
+        "derived: belief and observation points in the landmark frame FL after one movement",
+    ),
+    Topic(
+        "/pipeline/estimate",
+        "bslam.Estimate",
+        "derived: map after one movement (means, covariances in FL) or why it was skipped",
+    ),
 ]
 
 #: Topic name -> :class:`Topic`.

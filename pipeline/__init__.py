@@ -1,6 +1,5 @@
 """Pure computation: bearings in, particle sets and estimates out (no I/O)."""
 
-from pipeline.batch_ls import batch_least_squares
 from pipeline.cones import ConeIntersection, Degenerate, intersect_cones, vision_cone_polygon
 from pipeline.crb import cramer_rao_bound, fisher_information, truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
@@ -18,6 +17,17 @@ from pipeline.priors import (
     range_marginal,
 )
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
+
+
+def __getattr__(name: str) -> object:
+    # batch_least_squares needs scipy.optimize (~0.25 s to import): load it on first use only,
+    # so that `bslam process` and `bslam replay` do not pay for it.
+    if name == "batch_least_squares":
+        from pipeline.batch_ls import batch_least_squares
+
+        return batch_least_squares
+    raise AttributeError(f"module 'pipeline' has no attribute {name!r}")
+
 
 __all__ = [
     "R_MAX_FR",

@@ -1,31 +1,26 @@
-"""Camera frames as ``/camera/panorama`` messages: lossless PNG or raw ``bgr8``, base64 in JSON.
+"""Camera frames as ``/camera/panorama`` messages: lossless PNG or raw ``bgr8``.
 
-PNG speed/size trade-off (``png_level``), measured on one core of the development machine with
-noisy synthetic panoramas (see ``tests/bench/test_bench_writer.py`` for the recorder figures):
+The image bytes are returned as a bytes-like ``data`` field: :class:`recorder.writer.LogWriter`
+base64-encodes it straight into the JSON record (the Foxglove JSON form of ``bytes``), so the
+multi-megabyte base64 text is never built as a Python string. Encoding trade-off:
 
-====== ====================================== ============== ===============
-level  zlib settings                          176x255        1920x960
-====== ====================================== ============== ===============
-0      stored, no filter                      0.1 ms, 1.0x   5 ms, 1.0x
-1      level 1, SUB filter, Huffman only      0.9 ms, ~0.5x  42 ms, ~0.45x
-2..9   that zlib level, adaptive filters      >= 2 ms        >= 90 ms
-====== ====================================== ============== ===============
+* ``png`` (``foxglove.CompressedImage``): :func:`recorder.png.encode_png`; level 1 stores about
+  half the raw size and costs most of the recorder's time per frame;
+* ``bgr8`` (``foxglove.RawImage``): the pixels as they are; the fastest (no encoding at all),
+  the size of PNG level 0 (twice that of level 1).
 
-(size relative to the raw BGR bytes). Level 1 is the default: half the size at over 1,000
-frames/s for the paper's 176x255 panoramas; use level 0 for large frames at video rate.
+Both are lossless and both are displayed by Foxglove's Image panel.
 """
 
 from __future__ import annotations
 
-import base64
 from typing import Any, Literal
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from data_schemas.errors import ImageError
 from data_schemas.stamps import stamp_from_ns
+from recorder.png import check_bgr, encode_png
 
 Encoding = Literal["png", "bgr8"]
 FRAME_ID = "panorama"
@@ -33,36 +28,10 @@ FRAME_ID = "panorama"
 IMAGE_SCHEMA: dict[str, str] = {"png": "foxglove.CompressedImage", "bgr8": "foxglove.RawImage"}
 
 
-def png_params(level: int) -> list[int]:
-    """``cv2.imencode`` parameters for ``png_level`` 0..9 (see module table)."""
-    if not 0 <= level <= 9:
-        raise ValueError(f"PNG level must be 0..9, got {level}")
-    if level == 0:
-        return [cv2.IMWRITE_PNG_COMPRESSION, 0, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
-    if level == 1:
-        return [
-            cv2.IMWRITE_PNG_COMPRESSION,
-            1,
-            cv2.IMWRITE_PNG_FILTER,
-            cv2.IMWRITE_PNG_FILTER_SUB,
-            cv2.IMWRITE_PNG_STRATEGY,
-            cv2.IMWRITE_PNG_STRATEGY_HUFFMAN_ONLY,
-        ]
-    return [cv2.IMWRITE_PNG_COMPRESSION, level]
-
-
-def encode_png(image_bgr: NDArray[np.uint8], params: list[int]) -> bytes:
-    """PNG bytes of a BGR uint8 ``(H, W, 3)`` image (``params`` from :func:`png_params`)."""
-    ok, buf = cv2.imencode(".png", image_bgr, params)
-    if not ok:
-        raise ImageError(f"PNG encoding failed for an image of shape {image_bgr.shape}")
-    return buf.tobytes()
-
-
 def frame_message(
-    image_bgr: NDArray[np.uint8], t_ns: int, *, encoding: Encoding, params: list[int]
+    image_bgr: NDArray[np.uint8], t_ns: int, *, encoding: Encoding, png_level: int = 1
 ) -> dict[str, Any]:
-    """The ``/camera/panorama`` message of one frame taken at ``t_ns``.
+    """The ``/camera/panorama`` message of one frame taken at ``t_ns``, for ``LogWriter``.
 
     Parameters
     ----------
@@ -72,17 +41,19 @@ def frame_message(
         Capture time, ns since the epoch (session clock).
     encoding : {"png", "bgr8"}
         ``foxglove.CompressedImage`` PNG or ``foxglove.RawImage`` bgr8; both lossless.
-    params : list of int
-        PNG parameters (ignored for ``bgr8``).
+    png_level : int
+        PNG level 0..3 (:mod:`recorder.png`; ignored for ``bgr8``).
+
+    Returns
+    -------
+    dict
+        The message with ``data`` as bytes-like (PNG bytes, or the C-contiguous pixel array).
     """
-    if image_bgr.dtype != np.uint8 or image_bgr.ndim != 3 or image_bgr.shape[2] != 3:
-        raise ImageError(
-            f"frames must be BGR uint8 (H, W, 3), got {image_bgr.dtype} {image_bgr.shape}"
-        )
     stamp = stamp_from_ns(t_ns)
     if encoding == "png":
-        data = base64.b64encode(encode_png(image_bgr, params)).decode("ascii")
-        return {"timestamp": stamp, "frame_id": FRAME_ID, "format": "png", "data": data}
+        png = encode_png(image_bgr, png_level)
+        return {"timestamp": stamp, "frame_id": FRAME_ID, "format": "png", "data": png}
+    check_bgr(image_bgr)
     height, width = image_bgr.shape[:2]
     return {
         "timestamp": stamp,
@@ -91,5 +62,5 @@ def frame_message(
         "height": height,
         "encoding": "bgr8",
         "step": 3 * width,
-        "data": base64.b64encode(np.ascontiguousarray(image_bgr).tobytes()).decode("ascii"),
+        "data": np.ascontiguousarray(image_bgr).data.cast("B"),
     }

@@ -22,7 +22,6 @@ from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, breakup_chunk
-from mcap.writer import Writer
 
 from data_schemas.codec import decode
 from data_schemas.errors import (
@@ -33,11 +32,11 @@ from data_schemas.errors import (
 )
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
-
-MAGIC = bytes([137, 77, 67, 65, 80, 48, 13, 10])
-_RECORD_HEADER = struct.Struct("<BQ")
+from recorder.mcapout import MAGIC, RECORD_HEADER, McapChunkWriter
 
 Source = str | os.PathLike[str] | IO[bytes]
+#: Chunk size of a recovered log.
+_RECOVER_CHUNK_BYTES = 4 * 1024 * 1024
 
 
 @dataclass(frozen=True)
@@ -206,12 +205,12 @@ class LogReader:
         self.trailing_bytes = 0
         while True:
             self._stream.seek(pos)
-            header = self._stream.read(_RECORD_HEADER.size)
-            if len(header) < _RECORD_HEADER.size:
+            header = self._stream.read(RECORD_HEADER.size)
+            if len(header) < RECORD_HEADER.size:
                 self.trailing_bytes = end - pos
                 return
-            opcode, length = _RECORD_HEADER.unpack(header)
-            body_start = pos + _RECORD_HEADER.size
+            opcode, length = RECORD_HEADER.unpack(header)
+            body_start = pos + RECORD_HEADER.size
             if length > end - body_start:
                 self.trailing_bytes = end - pos
                 return
@@ -352,22 +351,20 @@ def recover_log(broken: str | os.PathLike[str], fixed: str | os.PathLike[str]) -
         except OSError as exc:
             raise LogError(f"cannot create {os.fspath(fixed)}: {exc.strerror}") from None
         with out:
-            writer = Writer(out, chunk_size=4 * 1024 * 1024)
-            writer.start(profile="", library="bearing-slam recover")
-            for name, values in reader.metadata.items():
-                writer.add_metadata(name, values)
+            writer = McapChunkWriter(out, library="bearing-slam recover")
+            writer.start(reader.metadata)
             schema_ids: dict[int, int] = {}
             channel_ids: dict[int, int] = {}
             messages = 0
             for record in reader.raw_records():
                 if isinstance(record, Schema):
                     if record.id not in schema_ids:
-                        schema_ids[record.id] = writer.register_schema(
+                        schema_ids[record.id] = writer.add_schema(
                             record.name, record.encoding, record.data
                         )
                 elif isinstance(record, Channel):
                     if record.id not in channel_ids:
-                        channel_ids[record.id] = writer.register_channel(
+                        channel_ids[record.id] = writer.add_channel(
                             record.topic,
                             record.message_encoding,
                             schema_ids.get(record.schema_id, 0),
@@ -376,13 +373,15 @@ def recover_log(broken: str | os.PathLike[str], fixed: str | os.PathLike[str]) -
                 else:
                     writer.add_message(
                         channel_ids[record.channel_id],
-                        record.log_time,
-                        record.data,
-                        record.publish_time,
                         record.sequence,
+                        record.log_time,
+                        record.publish_time,
+                        [record.data],
                     )
                     messages += 1
-            writer.finish()  # type: ignore[no-untyped-call]
+                    if writer.pending_bytes >= _RECOVER_CHUNK_BYTES:
+                        writer.close_chunk()
+            writer.finish()
         return RecoverReport(
             messages=messages,
             chunks=reader.chunk_count,

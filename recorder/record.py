@@ -28,16 +28,16 @@ import signal
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from types import FrameType
-from typing import Any, Protocol
-
-import numpy as np
+from typing import Any
 
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import BslamError, LogError
 from data_schemas.stamps import stamp_from_ns
 from recorder.camera import Camera
 from recorder.clock import Clock
-from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message, png_params
+from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message
+from recorder.moves import Move
+from recorder.png import check_level
 from recorder.robot import Robot, drive, turn
 from recorder.writer import LogWriter
 
@@ -49,53 +49,35 @@ LOG_NAME = "bslam.recorder"
 GroundTruth = Callable[[], Sequence[float]]
 
 
-class MoveLike(Protocol):
-    """What the loop needs of a move (``Move`` here, or the simulator's planned moves)."""
-
-    @property
-    def turn_rad(self) -> float: ...
-
-    @property
-    def distance_m(self) -> float: ...
-
-
 @dataclass(frozen=True)
-class Move:
-    """One movement: turn in place by ``turn_rad`` (CCW), then drive ``distance_m`` straight."""
+class RecordSettings:
+    """How the loop captures and stores frames (the ``bslam record``/``simulate`` options).
 
-    turn_rad: float
-    distance_m: float
-
-
-def random_moves(
-    rng: np.random.Generator,
-    count: int | None,
-    distance_m: tuple[float, float],
-    turn_rad: float | None = None,
-) -> Iterator[Move]:
-    """Moves for a real robot: turn uniform in [-pi, pi) (or ``turn_rad``), distance uniform.
-
-    Parameters
+    Attributes
     ----------
-    rng : numpy.random.Generator
-        Source of the pseudo-random turns and distances.
-    count : int or None
-        Number of moves; None for endless (stop with Ctrl-C).
-    distance_m : (float, float)
-        Range of the straight distance, metres (equal bounds for a fixed distance).
-    turn_rad : float, optional
-        Fixed turn instead of a random one.
+    frame_rate_hz : float
+        Frames per second captured while driving (keyframes come in addition).
+    encoding : {"png", "bgr8"}
+        Frame storage; see :mod:`recorder.frames`.
+    png_level : int
+        PNG level 0..3 (see :mod:`recorder.png`; ignored for ``bgr8``).
+    poll_s : float
+        Motion-status polling period, seconds (also the signal-check period).
     """
-    lo, hi = distance_m
-    if not 0 < lo <= hi:
-        raise ValueError(f"distance range must satisfy 0 < lo <= hi, got {distance_m}")
-    i = 0
-    while count is None or i < count:
-        angle = (
-            turn_rad if turn_rad is not None else wrap_rad(float(rng.uniform(-math.pi, math.pi)))
-        )
-        yield Move(angle, float(rng.uniform(lo, hi)) if hi > lo else lo)
-        i += 1
+
+    frame_rate_hz: float = 5.0
+    encoding: Encoding = "png"
+    png_level: int = 1
+    poll_s: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not self.frame_rate_hz > 0:
+            raise ValueError(f"frame rate must be > 0 Hz, got {self.frame_rate_hz}")
+        if self.encoding not in IMAGE_SCHEMA:
+            raise ValueError(f"encoding must be one of {sorted(IMAGE_SCHEMA)}, got {self.encoding}")
+        check_level(self.png_level)
+        if not self.poll_s > 0:
+            raise ValueError(f"poll period must be > 0 s, got {self.poll_s}")
 
 
 @dataclass(frozen=True)
@@ -189,16 +171,36 @@ class CommandSink:
         self._writer.write("/robot/command", msg)
 
 
+@dataclass(frozen=True)
+class Rig:
+    """What a session records from.
+
+    Attributes
+    ----------
+    robot : Robot
+        Open robot whose ``on_exchange`` is ``sink``.
+    sink : CommandSink
+        Writes the robot's ``/robot/command`` messages once the log exists.
+    camera : Camera
+        Frame source; its calibration is in the session document.
+    clock : Clock
+        The session clock (the writer's and the robot's).
+    ground_truth : callable, optional
+        Simulation only: the true pose now; written with every frame.
+    """
+
+    robot: Robot
+    sink: CommandSink
+    camera: Camera
+    clock: Clock
+    ground_truth: GroundTruth | None = None
+
+
 @dataclass
 class _Recorder:
-    robot: Robot
-    camera: Camera
+    rig: Rig
     writer: LogWriter
-    clock: Clock
-    frame_period_ns: int
-    encoding: Encoding
-    png: list[int]
-    ground_truth: GroundTruth | None
+    settings: RecordSettings
     frames: int = 0
     last_frame_ns: int | None = None
 
@@ -207,7 +209,7 @@ class _Recorder:
         self.writer.write(
             "/log",
             {
-                "timestamp": stamp_from_ns(self.clock.monotonic_ns()),
+                "timestamp": stamp_from_ns(self.rig.clock.monotonic_ns()),
                 "level": level,
                 "message": text,
                 "name": LOG_NAME,
@@ -219,12 +221,13 @@ class _Recorder:
     def frame(self) -> int:
         """Capture, write a frame (and the true pose in simulation); return its time stamp."""
         _FLAG.check()
-        t_ns = self.clock.monotonic_ns()
-        image = self.camera.read()
-        msg = frame_message(image, t_ns, encoding=self.encoding, params=self.png)
-        self.writer.write("/camera/panorama", msg, schema=IMAGE_SCHEMA[self.encoding])
-        if self.ground_truth is not None:
-            x, y, heading = self.ground_truth()
+        t_ns = self.rig.clock.monotonic_ns()
+        image = self.rig.camera.read()
+        encoding = self.settings.encoding
+        msg = frame_message(image, t_ns, encoding=encoding, png_level=self.settings.png_level)
+        self.writer.write("/camera/panorama", msg, schema=IMAGE_SCHEMA[encoding])
+        if self.rig.ground_truth is not None:
+            x, y, heading = self.rig.ground_truth()
             self.writer.write(
                 "/sim/ground_truth",
                 {
@@ -241,24 +244,25 @@ class _Recorder:
     def frame_if_due(self) -> None:
         """``on_poll`` while driving: a frame every ``frame_period_ns``."""
         _FLAG.check()
-        now = self.clock.monotonic_ns()
-        if self.last_frame_ns is None or now - self.last_frame_ns >= self.frame_period_ns:
+        now = self.rig.clock.monotonic_ns()
+        period_ns = round(1e9 / self.settings.frame_rate_hz)
+        if self.last_frame_ns is None or now - self.last_frame_ns >= period_ns:
             self.frame()
 
-    def keyframe(self, index: int, phase: str, move: MoveLike) -> None:
+    def keyframe(self, index: int, phase: str, move: Move) -> None:
         """At rest: keyframe, odometry, and the movement message pointing at the keyframe."""
-        self.robot.stop()
+        robot = self.rig.robot
+        robot.stop()
         t_key = self.frame()
-        left, right = self.robot.read_position_counters()
-        config = self.robot.config
-        now = stamp_from_ns(self.clock.monotonic_ns())
+        left, right = robot.read_position_counters()
+        now = stamp_from_ns(self.rig.clock.monotonic_ns())
         self.writer.write(
             "/robot/odometry",
             {
                 "timestamp": now,
                 "left_pulses": left,
                 "right_pulses": right,
-                "mm_per_pulse": config.mm_per_pulse,
+                "mm_per_pulse": robot.config.mm_per_pulse,
             },
         )
         self.writer.write(
@@ -275,43 +279,25 @@ class _Recorder:
 
 
 def record_session(
-    *,
-    robot: Robot,
-    camera: Camera,
+    rig: Rig,
     writer: LogWriter,
-    clock: Clock,
-    moves: Iterable[MoveLike],
-    frame_rate_hz: float = 5.0,
-    encoding: Encoding = "png",
-    png_level: int = 1,
-    poll_s: float = 0.05,
-    ground_truth: GroundTruth | None = None,
+    moves: Iterable[Move],
+    settings: RecordSettings,
+    *,
     progress: Callable[[Progress], None] | None = None,
 ) -> RecordResult:
     """Run the movement plan and record everything into ``writer``.
 
     Parameters
     ----------
-    robot : Robot
-        Open robot whose ``on_exchange`` writes ``/robot/command`` (see :class:`CommandSink`).
-    camera : Camera
-        Frame source; its calibration is in the session document.
+    rig : Rig
+        Robot, command sink (attached to ``writer`` here), camera, clock, ground truth.
     writer : LogWriter
         Open log; the caller finishes it (``with LogWriter(...)``), also after an error.
-    clock : Clock
-        The session clock (the writer's and the robot's).
     moves : iterable of Move
         The plan; pulled one at a time (a simulator may plan from the true pose).
-    frame_rate_hz : float
-        Frames per second captured while driving (keyframes come in addition).
-    encoding : {"png", "bgr8"}
-        Frame storage; see :mod:`recorder.frames`.
-    png_level : int
-        PNG compression 0..9 (see :mod:`recorder.frames`).
-    poll_s : float
-        Motion-status polling period, seconds (also the signal-check period).
-    ground_truth : callable, optional
-        Simulation only: the true pose now; written with every frame.
+    settings : RecordSettings
+        Frame rate, encoding, PNG level, polling period.
     progress : callable, optional
         Called with :class:`Progress` after each movement.
 
@@ -322,20 +308,10 @@ def record_session(
     BslamError
         Robot, camera or disk fault; logged to ``/log`` when possible, motors stopped.
     """
-    if frame_rate_hz <= 0:
-        raise ValueError(f"frame rate must be > 0 Hz, got {frame_rate_hz}")
-    rec = _Recorder(
-        robot=robot,
-        camera=camera,
-        writer=writer,
-        clock=clock,
-        frame_period_ns=round(1e9 / frame_rate_hz),
-        encoding=encoding,
-        png=png_params(png_level),
-        ground_truth=ground_truth,
-    )
-    poll = min(poll_s, 1.0 / frame_rate_hz)
-    config = robot.config
+    rig.sink.attach(writer)
+    rec = _Recorder(rig, writer, settings)
+    poll = min(settings.poll_s, 1.0 / settings.frame_rate_hz)
+    robot, clock, config = rig.robot, rig.clock, rig.robot.config
     done = 0
     try:
         rec.log(INFO, f"session started: robot {config.model} on {config.port}")
@@ -373,39 +349,25 @@ def _stop_after(rec: _Recorder, level: int, text: str) -> None:
         with contextlib.suppress(LogError):
             rec.log(level, text)
     with contextlib.suppress(BslamError):
-        rec.robot.stop()
+        rec.rig.robot.stop()
 
 
 def record_to_file(
     out: str | os.PathLike[str],
     session_doc: dict[str, Any],
+    rig: Rig,
+    moves: Iterable[Move],
+    settings: RecordSettings,
     *,
-    sink: CommandSink,
-    writer_options: dict[str, Any] | None = None,
-    **loop: Any,
+    progress: Callable[[Progress], None] | None = None,
 ) -> RecordResult:
-    """Create the log, attach the robot's ``sink``, run :func:`record_session`, finish the log.
+    """Create the log ``out``, run :func:`record_session` into it, finish the log.
 
     The one code path of ``bslam record`` and ``bslam simulate``. SIGINT/SIGTERM are handled
     (see :func:`stop_on_signals`) from before the log exists until it is finished, so a stop
-    request always leaves an indexed file.
-
-    Parameters
-    ----------
-    out : path
-        Log to write.
-    session_doc : dict
-        Session document (:func:`recorder.session.build_session_doc`).
-    sink : CommandSink
-        The ``on_exchange`` the robot was opened with.
-    writer_options : dict, optional
-        Extra keyword arguments of :class:`LogWriter` (chunking, compression, fsync).
-    **loop
-        Keyword arguments of :func:`record_session` (``robot``, ``camera``, ``clock``, ...).
+    request always leaves an indexed file. ``session_doc`` is the session document
+    (:func:`recorder.session.build_session_doc`); the other arguments are those of
+    :func:`record_session`.
     """
-    with (
-        stop_on_signals(),
-        LogWriter(out, session_doc, clock=loop["clock"], **(writer_options or {})) as writer,
-    ):
-        sink.attach(writer)
-        return record_session(writer=writer, **loop)
+    with stop_on_signals(), LogWriter(out, session_doc, clock=rig.clock) as writer:
+        return record_session(rig, writer, moves, settings, progress=progress)

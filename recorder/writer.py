@@ -6,16 +6,23 @@ closes itself, so that every byte it has accepted reaches the operating system s
 * a chunk is closed when it holds ``chunk_bytes`` of messages, or when its oldest message is
   ``chunk_seconds`` old (real time). A background thread closes old chunks even while the
   recorder is blocked (waiting for the robot, say);
-* closing a chunk writes it and its message indexes to the file and flushes Python's buffer,
-  so a killed process (SIGKILL) loses at most the open chunk: under one second of data;
-* with ``fsync=True`` (the default for files) each closed chunk is also ``os.fsync``-ed, outside
-  the lock, so a power cut loses no more than a kill;
+* closing a chunk writes it and its message indexes to the file in one ``write`` and flushes
+  Python's buffer, so a killed process (SIGKILL) loses at most the open chunk: under one second
+  of data;
+* with ``fsync=True`` (the default for files) the background thread ``os.fsync``-s each closed
+  chunk at once, so a power cut loses no more than a kill, while the recorder goes on encoding
+  the next frame (``fsync`` of megabytes takes milliseconds);
 * :meth:`LogWriter.finish` writes the summary and footer (an indexed file). An unfinished file
   is still readable chunk by chunk (:mod:`recorder.logread`) and ``bslam recover`` indexes it.
 
 If the disk fills up (``ENOSPC``, ``EDQUOT``, or ``EFBIG`` from ``RLIMIT_FSIZE``) the writer
 cuts the file back to the end of the last complete chunk, stops, and raises
 :class:`~data_schemas.errors.DiskFullError`.
+
+Speed: the MCAP records are assembled by :class:`recorder.mcapout.McapChunkWriter` without
+intermediate copies, and a field that the schema declares ``contentEncoding: base64`` (image
+``data``) may be given as bytes: it is base64-encoded with SIMD (``pybase64``) straight into
+the record, never built as a Python string or scanned by ``json.dumps``.
 """
 
 from __future__ import annotations
@@ -26,11 +33,12 @@ import json
 import os
 import threading
 import time
+from functools import cache
 from importlib.metadata import PackageNotFoundError, version
 from types import TracebackType
-from typing import IO, Any, Literal
+from typing import IO, Any
 
-from mcap.writer import CompressionType, Writer
+import pybase64
 
 from data_schemas.codec import validate
 from data_schemas.errors import DiskFullError, LogError, SchemaError
@@ -39,22 +47,17 @@ from data_schemas.registry import (
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
     SESSION_METADATA_NAME,
+    schema_dict,
     schema_json,
     topic,
 )
 from data_schemas.session import session_from_doc
 from data_schemas.stamps import ns_from_stamp
 from recorder.clock import Clock
+from recorder.mcapout import Bytes, McapChunkWriter
 
 #: errno values that mean "no room left for this file".
 _FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT})
-
-Compression = Literal["zstd", "lz4", "none"]
-_COMPRESSION = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
 
 
 def software_version() -> str:
@@ -81,11 +84,9 @@ class LogWriter:
         Close a chunk once it holds this many bytes of records.
     chunk_seconds : float
         Close a chunk once its oldest message is this old (real seconds); at most 1.
-    compression : {"zstd", "lz4", "none"}
-        Chunk compression. Frames are PNG already: zstd only wins back base64's overhead
-        (about a quarter) and costs more than encoding the PNG, so the default is none.
     fsync : bool
-        ``os.fsync`` after every closed chunk (ignored for streams without a file number).
+        ``os.fsync`` every closed chunk (in the background thread; ignored for streams without a
+        file number).
 
     Examples
     --------
@@ -101,7 +102,6 @@ class LogWriter:
         clock: Clock,
         chunk_bytes: int = 4 * 1024 * 1024,
         chunk_seconds: float = 0.5,
-        compression: Compression = "none",
         fsync: bool = True,
     ) -> None:
         if not 0 < chunk_seconds <= 1.0:
@@ -122,16 +122,11 @@ class LogWriter:
             self._stream = output
             self.name = str(getattr(output, "name", "<stream>"))
         self._fileno = _fileno(self._stream) if fsync else None
-        self._mcap = Writer(
-            self._stream,
-            chunk_size=2**62,  # chunks are closed by this class, never by size inside mcap
-            compression=_COMPRESSION[compression],
-        )
+        self._mcap = McapChunkWriter(self._stream, library=f"bearing-slam/{software_version()}")
         self._lock = threading.Lock()
         self._channels: dict[str, tuple[int, str]] = {}
         self._schema_ids: dict[str, int] = {}
         self._sequence: dict[int, int] = {}
-        self._pending_bytes = 0
         self._pending_since: float | None = None
         self._messages = 0
         self._committed_messages = 0
@@ -140,6 +135,8 @@ class LogWriter:
         self._error_raised = False
         self._finished = False
         self._stop = threading.Event()
+        self._wake = threading.Event()
+        self._unsynced = False
         with self._lock:
             self._guard(self._start, session_doc)
         self._flusher = threading.Thread(target=self._flush_loop, name="mcap-flush", daemon=True)
@@ -169,7 +166,9 @@ class LogWriter:
         topic_name : str
             A registered topic (``data_schemas.registry.TOPICS``).
         msg : dict
-            The message; its ``timestamp`` (if any) becomes the MCAP ``publish_time``.
+            The message; its ``timestamp`` (if any) becomes the MCAP ``publish_time``. A
+            top-level field with ``contentEncoding: base64`` in the schema (image ``data``)
+            may be bytes-like instead of a base64 string: the writer encodes it.
         schema : str, optional
             Schema name; default the topic's. An image topic may use any of
             ``IMAGE_SCHEMAS`` (e.g. ``foxglove.RawImage``), but one schema per topic per log.
@@ -182,8 +181,7 @@ class LogWriter:
             No room left; the file keeps every complete chunk.
         """
         schema_name = self._schema_for(topic_name, schema)
-        validate(schema_name, msg, what=topic_name)
-        data = _json_bytes(msg)
+        data = _json_parts(schema_name, msg, what=topic_name)
         stamp = msg.get("timestamp")
         with self._lock:
             self._check_usable()
@@ -191,20 +189,19 @@ class LogWriter:
             log_time = self._clock.monotonic_ns()
             publish_time = ns_from_stamp(stamp) if stamp is not None else log_time
             seq = self._sequence[channel_id] = self._sequence[channel_id] + 1
-            self._guard(self._mcap.add_message, channel_id, log_time, data, publish_time, seq)
+            self._mcap.add_message(channel_id, seq, log_time, publish_time, data)
             self._messages += 1
-            self._pending_bytes += len(data)
             now = time.monotonic()
             if self._pending_since is None:
                 self._pending_since = now
             full = (
-                self._pending_bytes >= self._chunk_bytes
+                self._mcap.pending_bytes >= self._chunk_bytes
                 or now - self._pending_since >= self._chunk_seconds
             )
             if full:
                 self._commit()
         if full:
-            self._sync()
+            self._wake.set()  # the background thread fsyncs the chunk
         return log_time
 
     def flush(self) -> None:
@@ -224,6 +221,7 @@ class LogWriter:
             return
         self._finished = True
         self._stop.set()
+        self._wake.set()
         self._flusher.join()
         with self._lock:
             if self._error is None:
@@ -252,11 +250,9 @@ class LogWriter:
 
     # ------------------------------------------------------------------ internals
     def _start(self, session_doc: dict[str, Any]) -> None:
-        self._mcap.start(profile="", library=f"bearing-slam/{software_version()}")
-        self._mcap.add_metadata(
-            SESSION_METADATA_NAME, {"json": json.dumps(session_doc, separators=(",", ":"))}
-        )
-        self._mcap.flush()  # type: ignore[no-untyped-call]
+        session_json = json.dumps(session_doc, separators=(",", ":"))
+        self._mcap.start({SESSION_METADATA_NAME: {"json": session_json}})
+        self._stream.flush()
         self._good_offset = self._stream.tell()
 
     def _schema_for(self, topic_name: str, schema: str | None) -> str:
@@ -277,11 +273,11 @@ class LogWriter:
             return known[0]
         schema_id = self._schema_ids.get(schema_name)
         if schema_id is None:
-            schema_id = self._mcap.register_schema(
+            schema_id = self._mcap.add_schema(
                 schema_name, SCHEMA_ENCODING, schema_json(schema_name)
             )
             self._schema_ids[schema_name] = schema_id
-        channel_id = self._mcap.register_channel(topic_name, MESSAGE_ENCODING, schema_id)
+        channel_id = self._mcap.add_channel(topic_name, MESSAGE_ENCODING, schema_id)
         self._channels[topic_name] = (channel_id, schema_name)
         self._sequence[channel_id] = 0
         return channel_id
@@ -290,11 +286,11 @@ class LogWriter:
         """Close the open chunk and flush (caller holds the lock)."""
         if self._pending_since is None:
             return
-        self._guard(self._mcap.flush)
+        self._guard(self._mcap.close_chunk)
         self._good_offset = self._stream.tell()
         self._committed_messages = self._messages
-        self._pending_bytes = 0
         self._pending_since = None
+        self._unsynced = True
 
     def _sync(self) -> None:
         if self._fileno is None or self._error is not None:
@@ -303,19 +299,23 @@ class LogWriter:
             os.fsync(self._fileno)
         except OSError as exc:
             with self._lock:
-                self._fail(exc)
+                if self._error is None:  # else the file was closed after another error
+                    self._fail(exc)
 
     def _flush_loop(self) -> None:
-        """Background thread: close chunks that got old while nobody wrote."""
+        """Background thread: fsync closed chunks; close chunks that got old meanwhile."""
         period = self._chunk_seconds / 4
-        while not self._stop.wait(period):
+        while not self._stop.is_set():
+            self._wake.wait(period)
+            self._wake.clear()
             try:
                 with self._lock:
                     since = self._pending_since
                     old = since is not None and time.monotonic() - since >= self._chunk_seconds
                     if old and self._error is None:
                         self._commit()
-                if old:
+                    unsynced, self._unsynced = self._unsynced, False
+                if unsynced:
                     self._sync()
             except LogError:
                 self._error_raised = False  # nobody has seen it: the next write/finish raises
@@ -363,44 +363,36 @@ class LogWriter:
             os.truncate(self._path, self._good_offset)
 
 
-#: String fields longer than this are spliced into the JSON text instead of re-encoded.
-_SPLICE_CHARS = 1 << 16
+@cache
+def _base64_fields(schema_name: str) -> frozenset[str]:
+    """Top-level fields of ``schema_name`` declared ``contentEncoding: base64``."""
+    properties = schema_dict(schema_name).get("properties", {})
+    return frozenset(k for k, v in properties.items() if v.get("contentEncoding") == "base64")
 
 
-def _json_bytes(msg: dict[str, Any]) -> bytes:
-    """Compact JSON of ``msg``; long plain-ASCII strings (base64 frames) are copied verbatim.
+def _json_parts(schema_name: str, msg: dict[str, Any], *, what: str) -> list[Bytes]:
+    """Validate ``msg`` and return its compact JSON as byte parts (see :meth:`LogWriter.write`).
 
-    ``json.dumps`` scans every character of a multi-megabyte base64 string for escapes; a
-    string of printable ASCII without quotes or backslashes encodes as itself, so it is
-    checked with one ``bytes.translate`` pass and spliced in.
+    Bytes-like values of base64 fields are validated as strings, then base64-encoded into
+    their own part; they come last in the JSON object.
     """
-    plain: dict[str, bytes] = {}
-    for key, value in msg.items():
-        if isinstance(value, str) and len(value) > _SPLICE_CHARS:
-            raw = _plain_ascii(value)
-            if raw is not None:
-                plain[key] = raw
-    if not plain:
-        return json.dumps(msg, separators=(",", ":")).encode()
-    head = {k: v for k, v in msg.items() if k not in plain}
-    parts = [json.dumps(head, separators=(",", ":")).encode()[:-1]]
-    for i, (key, raw) in enumerate(plain.items()):
-        sep = b"," if head or i > 0 else b""
-        parts.append(sep + json.dumps(key).encode() + b':"' + raw + b'"')
+    blobs = {k: v for k, v in msg.items() if isinstance(v, bytes | bytearray | memoryview)}
+    if not blobs:
+        validate(schema_name, msg, what=what)
+        return [json.dumps(msg, separators=(",", ":")).encode()]
+    allowed = _base64_fields(schema_name)
+    for key in blobs:
+        if key not in allowed:
+            raise SchemaError(f"{what}: field {key!r}: bytes given, but it is not a base64 field")
+    rest = {k: v for k, v in msg.items() if k not in blobs}
+    validate(schema_name, {**rest, **dict.fromkeys(blobs, "")}, what=what)
+    parts: list[Bytes] = [json.dumps(rest, separators=(",", ":")).encode()[:-1]]
+    sep = b"," if rest else b""
+    for key, value in blobs.items():
+        parts += [sep + json.dumps(key).encode() + b':"', pybase64.b64encode(value), b'"']
+        sep = b","
     parts.append(b"}")
-    return b"".join(parts)
-
-
-#: Bytes JSON writes as themselves inside a string.
-_JSON_PLAIN = bytes(c for c in range(0x20, 0x7F) if c not in b'"\\')
-
-
-def _plain_ascii(text: str) -> bytes | None:
-    """``text`` as ASCII bytes if JSON encodes it as itself between quotes, else None."""
-    if not text.isascii():
-        return None
-    raw = text.encode("ascii")
-    return None if raw.translate(None, _JSON_PLAIN) else raw
+    return parts
 
 
 def _fileno(stream: IO[bytes]) -> int | None:

@@ -136,13 +136,15 @@ class BearingExtractor:
     def masks(self, image_bgr: NDArray[np.uint8]) -> dict[str, NDArray[np.bool_]]:
         """Per landmark, the (H, W) boolean mask of its colour class (for display)."""
         image = check_image(image_bgr, self.calibration)
+        return self._masks(self._classify(self._region(image), 1), image.shape[:2])
+
+    def extract_with_masks(
+        self, image_bgr: NDArray[np.uint8]
+    ) -> tuple[dict[str, Detection], dict[str, NDArray[np.bool_]]]:
+        """:meth:`extract` and :meth:`masks` of one frame, classifying its pixels once."""
+        image = check_image(image_bgr, self.calibration)
         planes = self._classify(self._region(image), 1)
-        out = {}
-        for name, slot in zip(self.names, self._classifier.slots, strict=True):
-            full = np.zeros(image.shape[:2], np.bool_)
-            full[self._crop()] = (planes[slot.plane] & slot.bit) != 0
-            out[name] = full
-        return out
+        return self._detect(planes), self._masks(planes, image.shape[:2])
 
     # ------------------------------------------------------------------ internals
     def _crop(self) -> tuple[slice, slice]:
@@ -160,6 +162,17 @@ class BearingExtractor:
             ring = self._layout.ring
             valid = ring if n_frames == 1 else np.tile(ring, (n_frames, 1))
         return self._classifier.classify(stack, valid)
+
+    def _masks(
+        self, planes: list[NDArray[np.uint8]], shape: tuple[int, ...]
+    ) -> dict[str, NDArray[np.bool_]]:
+        """Full-frame (H, W) class masks from the classifier planes of the region."""
+        out = {}
+        for name, slot in zip(self.names, self._classifier.slots, strict=True):
+            full = np.zeros(shape, np.bool_)
+            full[self._crop()] = (planes[slot.plane] & slot.bit) != 0
+            out[name] = full
+        return out
 
     def _detect(self, planes: list[NDArray[np.uint8]]) -> dict[str, Detection]:
         slots = self._classifier.slots

@@ -25,7 +25,7 @@ import errno
 import sys
 from collections.abc import Callable
 from types import TracebackType
-from typing import Any
+from typing import Any, Protocol, cast
 
 import serial
 
@@ -34,6 +34,7 @@ from recorder.clock import Clock
 from recorder.robot.base import MotionStatus, RobotConfig
 from recorder.robot.errors import (
     GarbledReply,
+    RobotConfigError,
     RobotDisconnected,
     RobotProtocolError,
     RobotTimeout,
@@ -57,6 +58,27 @@ else:
     _LinkErrors = (serial.SerialException, OSError, termios.error)
 
 
+#: Baud rates of the Khepera II serial protocol (its running-mode switch picks one), 8N2.
+BAUDRATES = (9600, 19200, 38400, 57600, 115200)
+#: Largest wheel speed, pulses per 10 ms (127 x 8 mm/s: about 1 m/s).
+MAX_SPEED = 127
+
+
+def check_khepera_config(config: RobotConfig) -> None:
+    """Raise :class:`RobotConfigError` for settings a Khepera II cannot use."""
+    if config.baudrate not in BAUDRATES:
+        rates = ", ".join(str(b) for b in BAUDRATES)
+        raise RobotConfigError(
+            f"the Khepera II serial protocol runs at {rates} baud, not {config.baudrate}; "
+            "set --baud to the rate of the robot's running mode"
+        )
+    if config.move_speed > MAX_SPEED:
+        raise RobotConfigError(
+            f"move speed {config.move_speed} exceeds the Khepera II maximum of {MAX_SPEED} "
+            "pulses per 10 ms; lower it"
+        )
+
+
 def _port_error(port: str, exc: Exception) -> SerialPortError:
     code = getattr(exc, "errno", None)
     if code in _MISSING:
@@ -76,7 +98,19 @@ def _port_error(port: str, exc: Exception) -> SerialPortError:
     return SerialPortError(f"cannot open serial port {port} ({exc}); check the port name")
 
 
-def open_serial(config: RobotConfig) -> serial.SerialBase:
+class SerialPort(Protocol):
+    """What the driver needs of a pyserial port (``serial.Serial`` or a URL handler's class)."""
+
+    timeout: float | None
+
+    def write(self, data: bytes, /) -> int | None: ...
+    def read(self, size: int = 1, /) -> bytes: ...
+    def read_until(self, expected: bytes = ..., size: int | None = ...) -> bytes: ...
+    def reset_input_buffer(self) -> None: ...
+    def close(self) -> None: ...
+
+
+def open_serial(config: RobotConfig) -> SerialPort:
     """Open ``config.port`` (device path or pyserial URL) exclusively, 8N2, with timeouts.
 
     Raises
@@ -103,7 +137,7 @@ def open_serial(config: RobotConfig) -> serial.SerialBase:
         raise SerialPortError(
             f"cannot use serial port {config.port} ({exc}); check the port name and settings"
         ) from None
-    return port
+    return cast(SerialPort, port)
 
 
 class KheperaRobot:
@@ -111,7 +145,7 @@ class KheperaRobot:
 
     Parameters
     ----------
-    port : serial.SerialBase
+    port : SerialPort
         Open port (see :func:`open_serial`); the robot owns and closes it.
     config : RobotConfig
         Settings (retries, timeouts, geometry).
@@ -123,7 +157,7 @@ class KheperaRobot:
 
     def __init__(
         self,
-        port: serial.SerialBase,
+        port: SerialPort,
         config: RobotConfig,
         clock: Clock,
         on_exchange: OnExchange | None = None,
@@ -138,7 +172,16 @@ class KheperaRobot:
     def open(
         cls, config: RobotConfig, clock: Clock, on_exchange: OnExchange | None = None
     ) -> KheperaRobot:
-        """Open ``config.port`` (:func:`open_serial`), discard stale input, and wrap it."""
+        """Check the settings, open ``config.port`` (:func:`open_serial`), discard stale input.
+
+        Raises
+        ------
+        RobotConfigError
+            A baud rate the Khepera II does not speak, or a move speed above its maximum.
+        SerialPortError
+            The port is missing, busy or not accessible.
+        """
+        check_khepera_config(config)
         port = open_serial(config)
         try:
             port.reset_input_buffer()
@@ -170,8 +213,8 @@ class KheperaRobot:
 
     # ------------------------------------------------------------------ commands
     def version(self) -> str:
-        """Firmware version fields, e.g. ``"5.02,5.01"`` (``B``)."""
-        return ",".join(self.command("B").fields)
+        """BIOS and protocol versions, e.g. ``"5.02,5.01"`` (``B`` -> ``b,5.02,5.01``)."""
+        return ",".join(self.command("B", n_fields=2).fields[:2])
 
     def set_speed(self, left: int, right: int) -> None:
         """Wheel speeds in pulses per 10 ms (``D``)."""
@@ -195,9 +238,11 @@ class KheperaRobot:
         self.command("C", left, right)
 
     def motion_status(self) -> MotionStatus:
-        """Controller state (``K`` -> ``k,T_l,M_l,E_l,T_r,M_r,E_r``).
+        """Controller state (``K`` -> ``k,T_l,M_l,E_l,T_r,M_r,E_r``), per wheel.
 
-        T = 1 on target, M = 0 position mode / 1 speed mode, E = error.
+        T = 1 on target (0 moving), M = 0 position control / 1 speed control, E = position or
+        speed error. A finished ``C`` move reads T = 1, M = 1 (the controller is back in speed
+        mode at rest), so only T tells that a move is done.
         """
         t_l, m_l, e_l, t_r, m_r, e_r = int_fields(self.command("K", n_ints=6), 6)
         return MotionStatus(t_l == 1, t_r == 1, m_l == 0, m_r == 0, e_l, e_r)
@@ -208,7 +253,7 @@ class KheperaRobot:
         return left, right
 
     # ------------------------------------------------------------------ exchange
-    def command(self, letter: str, *args: int, n_ints: int = 0) -> Reply:
+    def command(self, letter: str, *args: int, n_ints: int = 0, n_fields: int = 0) -> Reply:
         """Send one request and return its reply, with bounded retries.
 
         Parameters
@@ -219,6 +264,8 @@ class KheperaRobot:
             Arguments.
         n_ints : int
             The reply must carry at least this many integer fields (else it counts as garbled).
+        n_fields : int
+            The reply must carry at least this many fields of any kind (else garbled).
 
         Raises
         ------
@@ -256,6 +303,8 @@ class KheperaRobot:
                 reply = parse_reply(raw, letter)
                 if n_ints:
                     int_fields(reply, n_ints)
+                if len(reply.fields) < n_fields:
+                    raise GarbledReply(f"reply {reply.text!r} should carry {n_fields} fields")
             except RobotProtocolError as exc:
                 self._report(t0_ns, text, reply_text, "protocol_error", attempt, str(exc))
                 self._resync(attempt)

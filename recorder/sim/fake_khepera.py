@@ -46,7 +46,7 @@ from recorder.robot.errors import RobotProtocolError
 from recorder.robot.protocol import Request, encode_reply, parse_request
 
 #: Reply to ``B``.
-VERSION_FIELDS = ("5.02", "sim")
+VERSION_FIELDS = ("5.02", "5.01")
 #: Reply to a request the robot does not understand.
 PROTOCOL_ERROR_REPLY = encode_reply("z", "Protocol error")
 
@@ -306,9 +306,13 @@ class FakeKhepera:
         counters = seg.counters(now_ns)
         fields: list[int] = []
         for wheel in (0, 1):
-            if seg.target is not None:  # position mode: T, M=0, E = remaining pulses
-                error = round(seg.target[wheel] - counters[wheel])
-                fields += [1 if seg.finished(now_ns) else 0, 0, error]
+            if seg.target is not None and not seg.finished(now_ns):
+                # position move under way: T=0, M=0 (position control), E = pulses to go
+                fields += [0, 0, round(seg.target[wheel] - counters[wheel])]
+            elif seg.target is not None:
+                # a finished move leaves the controller in speed mode at rest (K-Team's kMatlab
+                # example reads "AT TARGET, SPEED" after kMoveTo)
+                fields += [1, 1, 0]
             else:  # speed mode: on target when stopped, M=1, E = 0
                 fields += [1 if seg.rates_pps[wheel] == 0 else 0, 1, 0]
         return fields

@@ -12,7 +12,7 @@ is drawn, so actuation noise does not accumulate into the safety check.
 
 Public API
 ----------
-:class:`MovePlanner` (iterate it to get :class:`~recorder.sim.scenario.Move` objects),
+:class:`MovePlanner` (iterate it to get :class:`~recorder.moves.Move` objects),
 :class:`PlanError`.
 
 Example::
@@ -31,7 +31,8 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from data_schemas.errors import ScenarioError
-from recorder.sim.scenario import CLEARANCE_M, Move, Scenario
+from recorder.moves import Move
+from recorder.sim.scenario import CLEARANCE_M, Scenario
 from recorder.sim.world import Pose
 
 

@@ -45,6 +45,7 @@ from typing import Any, Literal
 from data_schemas.calibration import Calibration, UnwrappedCalibration, default_omni
 from data_schemas.codec import validate
 from data_schemas.errors import ScenarioError, SchemaError
+from recorder.moves import Move
 from recorder.sim.world import Arena, Landmark, Pose, SimWorld
 
 DEFAULT_LANDMARK_RADIUS_M = 0.01
@@ -101,14 +102,6 @@ class CameraSpec:
     bearing_noise_rad: float = 0.0
     pixel_noise: float = DEFAULT_PIXEL_NOISE
     lighting: bool = True
-
-
-@dataclass(frozen=True)
-class Move:
-    """One straight movement: turn in place by ``turn_rad`` (CCW), then drive ``distance_m``."""
-
-    turn_rad: float
-    distance_m: float
 
 
 @dataclass(frozen=True)

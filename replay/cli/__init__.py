@@ -21,6 +21,11 @@ COMMANDS: dict[str, str] = {
     "recover": "replay.cli.recover:recover",
     "record": "replay.cli.record:record",
     "simulate": "replay.cli.simulate:simulate",
+    "process": "replay.cli.process:process",
+    "replay": "replay.cli.replay_log:replay",
+    "regress": "replay.cli.regress:regress",
+    "demo": "replay.cli.demo:demo",
+    "experiment": "replay.cli.experiment:experiment",
 }
 
 

@@ -70,12 +70,18 @@ def _distance_range(text: str) -> tuple[float, float]:
 )
 @click.option(
     "--png-level",
-    type=click.IntRange(0, 9),
+    type=click.IntRange(0, 3),
     default=1,
     show_default=True,
-    help="PNG compression: 0 stored (fastest), 1 fast, up to 9.",
+    help="PNG compression: 0 stored (fastest), 1 fast (half size), up to 3.",
 )
-@click.option("--baud", type=int, default=9600, show_default=True, help="Serial baud rate.")
+@click.option(
+    "--baud",
+    type=int,
+    default=9600,
+    show_default=True,
+    help="Serial baud rate of the robot's running mode (Khepera II: 9600 to 115200).",
+)
 @click.option(
     "--model", default="khepera2", show_default=True, help="Robot model name (for the log)."
 )
@@ -111,7 +117,8 @@ def record(
 
     from recorder.camera import OpenCVCamera
     from recorder.clock import SystemClock
-    from recorder.record import CommandSink, random_moves
+    from recorder.moves import random_moves
+    from recorder.record import CommandSink, RecordSettings, Rig, record_to_file
     from recorder.robot import KheperaRobot, RobotConfig
     from recorder.session import build_session_doc, load_calibration_file, load_landmark_file
     from recorder.timebase import EpochClock
@@ -122,6 +129,11 @@ def record(
     catalog = load_landmark_file(landmarks)
     config = RobotConfig(
         port=port, model=model, baudrate=baud, mm_per_pulse=mm_per_pulse, wheel_base_m=wheel_base
+    )
+    settings = RecordSettings(
+        frame_rate_hz=frame_rate_hz,
+        encoding="png" if encoding == "png" else "bgr8",
+        png_level=png_level,
     )
     clock = EpochClock(SystemClock())
     camera = OpenCVCamera(camera_source, cal)
@@ -135,7 +147,7 @@ def record(
                 camera_source=camera_source,
                 calibration=cal,
                 frame_rate_hz=frame_rate_hz,
-                encoding="png" if encoding == "png" else "bgr8",
+                encoding=settings.encoding,
                 landmarks=catalog.landmarks,
                 reference=catalog.reference,
                 vision_error_rad=catalog.vision_error_rad,
@@ -143,18 +155,11 @@ def record(
             )
             turn_rad = None if turn_deg is None else math.radians(turn_deg)
             plan = random_moves(np.random.default_rng(seed), moves or None, distance_m, turn_rad)
+            rig = Rig(robot=robot, sink=sink, camera=camera, clock=clock)
             run_recording(
                 out,
-                doc,
-                sink=sink,
-                robot=robot,
-                camera=camera,
-                clock=clock,
-                moves=plan,
+                lambda progress: record_to_file(out, doc, rig, plan, settings, progress=progress),
                 total=moves or None,
-                frame_rate_hz=frame_rate_hz,
-                encoding=encoding,
-                png_level=png_level,
             )
     finally:
         camera.close()

@@ -4,28 +4,32 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Iterable
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import click
+
+if TYPE_CHECKING:
+    from recorder.record import Progress, RecordResult
 
 
 def run_recording(
     out: str | os.PathLike[str],
-    session_doc: dict[str, Any],
+    record: Callable[[Callable[[Progress], None]], RecordResult],
     *,
     total: int | None,
-    moves: Iterable[Any],
-    **loop: Any,
 ) -> None:
-    """Record into ``out`` with a progress bar on stderr; report the result on stdout.
+    """Run ``record(progress)`` with a progress bar on stderr; report the result on stdout.
 
-    A stop request (SIGINT/SIGTERM) finishes the log and exits with 128 + the signal number.
-    Keyword arguments are those of :func:`recorder.record.record_to_file`.
+    ``record`` is a library call that writes the log ``out`` and reports each movement to the
+    callback it is given (:func:`recorder.record.record_to_file`,
+    :func:`recorder.sim.simulate.simulate_to_file`); ``total`` is the number of moves for the bar
+    (None: unknown). A stop request (SIGINT/SIGTERM) finishes the log and exits with 128 + the
+    signal number.
     """
     from tqdm import tqdm
 
-    from recorder.record import Progress, RecordingInterrupted, record_to_file
+    from recorder.record import RecordingInterrupted
 
     with tqdm(total=total, unit="move", file=sys.stderr, desc="recording") as bar:
 
@@ -34,7 +38,7 @@ def run_recording(
             bar.set_postfix(frames=p.frames)
 
         try:
-            result = record_to_file(out, session_doc, moves=moves, progress=progress, **loop)
+            result = record(progress)
         except RecordingInterrupted as exc:
             bar.close()
             click.echo(f"{exc}; {os.fspath(out)} is finished and indexed", err=True)

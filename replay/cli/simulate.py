@@ -23,7 +23,7 @@ import click
     help="Frames per second while driving (virtual time).",
 )
 @click.option(
-    "--png-level", type=click.IntRange(0, 9), default=1, show_default=True, help="PNG level."
+    "--png-level", type=click.IntRange(0, 3), default=1, show_default=True, help="PNG level."
 )
 @click.option(
     "--turn-noise",
@@ -54,18 +54,9 @@ def simulate(
     renders the scenario from the robot's true pose, and `/sim/ground_truth` holds that pose at
     every frame.
     """
-    import numpy as np
-
-    from data_schemas.session import LandmarkSpec
-    from recorder.clock import VirtualClock
-    from recorder.record import CommandSink
-    from recorder.robot import KheperaRobot, RobotConfig
-    from recorder.session import build_session_doc
-    from recorder.sim.camera import SimCamera
-    from recorder.sim.fake_khepera import ActuationNoise, FakeKhepera
-    from recorder.sim.planner import MovePlanner
+    from recorder.record import RecordSettings
     from recorder.sim.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
-    from recorder.timebase import EpochClock
+    from recorder.sim.simulate import SimSettings, simulate_to_file
     from replay.cli.recording import run_recording
 
     if scenario_arg in BUILTIN_SCENARIOS:
@@ -74,55 +65,15 @@ def simulate(
         scenario = load_scenario(scenario_arg)
     if seed is not None:
         scenario = scenario.with_seed(seed)
-    rng_plan, rng_robot, rng_camera = (
-        np.random.default_rng(s) for s in np.random.SeedSequence(scenario.trajectory.seed).spawn(3)
+    settings = SimSettings(
+        RecordSettings(frame_rate_hz=frame_rate_hz, png_level=png_level),
+        turn_noise=turn_noise,
+        distance_noise=distance_noise,
     )
-    base = VirtualClock()
-    clock = EpochClock(base)
-    fake = FakeKhepera(
-        base,
-        rng_robot,
-        initial_pose_world=scenario.trajectory.start_world,
-        noise=ActuationNoise(turn_noise, distance_noise),
+    run_recording(
+        out,
+        lambda progress: simulate_to_file(
+            scenario, out, settings=settings, source=scenario_arg, progress=progress
+        ),
+        total=scenario.trajectory.n_moves,
     )
-    camera = SimCamera.from_scenario(scenario, fake.pose_world, rng_camera)
-    planner = MovePlanner(scenario, fake.pose_world, rng_plan)
-    sink = CommandSink()
-    with fake.serve_pty() as server:
-        config = RobotConfig(port=server.path, model="khepera2 (simulated)")
-        with KheperaRobot.open(config, clock, on_exchange=sink) as robot:
-            robot.version()
-            doc = build_session_doc(
-                created_unix_ns=clock.start_wall_ns,
-                robot=config.session_dict(),
-                camera_source=f"simulated ({scenario_arg})",
-                calibration=scenario.calibration(),
-                frame_rate_hz=frame_rate_hz,
-                encoding="png",
-                landmarks=[LandmarkSpec(lm.name, lm.color) for lm in scenario.landmarks],
-                reference=scenario.reference,
-                vision_error_rad=scenario.vision_error_rad,
-                scenario=scenario.to_dict(),
-                extra={
-                    "recorder": {"png_level": png_level},
-                    "simulation": {
-                        "seed": scenario.trajectory.seed,
-                        "turn_noise": turn_noise,
-                        "distance_noise": distance_noise,
-                    },
-                },
-            )
-            run_recording(
-                out,
-                doc,
-                total=len(planner),
-                moves=planner,
-                sink=sink,
-                robot=robot,
-                camera=camera,
-                clock=clock,
-                frame_rate_hz=frame_rate_hz,
-                encoding="png",
-                png_level=png_level,
-                ground_truth=fake.pose_world,
-            )

@@ -253,6 +253,21 @@ def test_masks_cover_the_landmarks(model: str) -> None:
         assert ys.size > 0 and off.max() <= truth.half_width_rad + 2 * math.pi / 90
 
 
+@pytest.mark.parametrize("model", MODELS)
+def test_extract_with_masks_is_extract_and_masks(model: str) -> None:
+    world, cal = _paper_world(), CALIBRATIONS[model]
+    extractor = BearingExtractor(cal, _catalog(world))
+    rng = np.random.default_rng(21)
+    for _ in range(3):
+        image = _render(world, cal, _random_pose(world, rng), rng).image_bgr
+        detections, masks = extractor.extract_with_masks(image)
+        assert detections == extractor.extract(image)
+        expected = extractor.masks(image)
+        assert list(masks) == list(expected)
+        assert all(np.array_equal(masks[n], expected[n]) for n in expected)
+        assert any(m.any() for m in masks.values())
+
+
 @pytest.mark.parametrize(
     ("image", "message"),
     [
@@ -266,7 +281,13 @@ def test_masks_cover_the_landmarks(model: str) -> None:
 @pytest.mark.parametrize("model", MODELS)
 def test_bad_images_raise_one_clear_line(model: str, image: object, message: str) -> None:
     extractor = BearingExtractor(CALIBRATIONS[model], _catalog(_paper_world()))
-    for call in (extractor.extract, extractor.masks, lambda im: extractor.extract_batch([im])):
+    calls = (
+        extractor.extract,
+        extractor.masks,
+        extractor.extract_with_masks,
+        lambda im: extractor.extract_batch([im]),
+    )
+    for call in calls:
         with pytest.raises(ImageError, match=message) as info:
             call(image)  # type: ignore[operator]
         assert "\n" not in str(info.value)

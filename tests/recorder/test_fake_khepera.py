@@ -40,7 +40,7 @@ def test_k_reports_moving_for_d_over_v_of_clock_time() -> None:
     clock.advance_ns(249_999_999)
     assert ask(fake, "K") == b"k,0,0,0,0,0,0\r\n"
     clock.advance_ns(1)
-    assert ask(fake, "K") == b"k,1,0,0,1,0,0\r\n"
+    assert ask(fake, "K") == b"k,1,1,0,1,1,0\r\n"  # done: on target, back in speed mode
     assert ask(fake, "E") == b"e,0,0\r\n"
     assert ask(fake, "H") == b"h,1000,1000\r\n"
     assert fake.pose_world() == pytest.approx((0.08, 0.0, 0.0), abs=1e-15)
@@ -143,7 +143,7 @@ def test_fault_selection_by_nth_letter_and_times() -> None:
     fake.inject("protocol_error", letter="h", times=2)
     fake.inject("garbled", nth=6, letter="B")
     got = [ask(fake, letter) for letter in "BBHHHBBB"]
-    version = b"b,5.02,sim\r\n"
+    version = b"b,5.02,5.01\r\n"
     assert got[0] == got[1] == version
     assert got[2] is None  # the third request is lost
     assert got[3] == got[4] == Z  # the next two H
@@ -159,7 +159,7 @@ def test_pty_serves_cr_or_lf_lines_and_closes_cleanly() -> None:
     fd = os.open(server.path, os.O_RDWR | os.O_NOCTTY)
     try:
         os.write(fd, b"B\rG,4,5\nH\r")
-        want = b"b,5.02,sim\r\ng\r\nh,4,5\r\n"
+        want = b"b,5.02,5.01\r\ng\r\nh,4,5\r\n"
         got = b""
         while len(got) < len(want) and select.select([fd], [], [], 2.0)[0]:
             got += os.read(fd, 100)
@@ -201,7 +201,7 @@ def test_module_serves_a_pty_until_ctrl_c() -> None:
         line = proc.stdout.readline()
         path = line.split(" on ")[1].split()[0]
         with KheperaRobot.open(RobotConfig(port=path), SystemClock()) as robot:
-            assert robot.version() == "5.02,sim"
+            assert robot.version() == "5.02,5.01"
             robot.set_position_counters(12, 34)
             assert robot.read_position_counters() == (12, 34)
         proc.send_signal(signal.SIGINT)

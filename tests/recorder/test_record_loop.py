@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import math
 import os
 import signal
@@ -21,12 +22,13 @@ from data_schemas.stamps import ns_from_stamp
 from recorder.camera import CameraEndOfStream, OpenCVCamera
 from recorder.clock import VirtualClock
 from recorder.logread import LogMessage, LogReader
+from recorder.moves import Move, random_moves
 from recorder.record import (
     CommandSink,
-    Move,
     Progress,
     RecordingInterrupted,
-    random_moves,
+    RecordSettings,
+    Rig,
     record_session,
     stop_on_signals,
 )
@@ -37,6 +39,7 @@ from recorder.writer import LogWriter
 from tests.recorder.samples import make_session_doc
 
 CAL = UnwrappedCalibration(32, 16)
+TEN_HZ = RecordSettings(frame_rate_hz=10.0)
 
 
 class _StillCamera:
@@ -63,6 +66,7 @@ def _run(
     camera: Any = None,
     fault: dict[str, Any] | None = None,
     progress: Any = None,
+    settings: RecordSettings = TEN_HZ,
 ) -> tuple[FakeKhepera, Any]:
     base = VirtualClock()
     clock = EpochClock(base)
@@ -75,18 +79,9 @@ def _run(
         config = RobotConfig(port=server.path, reply_timeout_s=0.2, retries=1)
         with KheperaRobot.open(config, clock, on_exchange=sink) as robot:
             robot.version()  # answered before the log exists: held by the sink
+            rig = Rig(robot, sink, camera, clock, ground_truth=fake.pose_world)
             with LogWriter(path, make_session_doc(), clock=clock) as writer:
-                sink.attach(writer)
-                result = record_session(
-                    robot=robot,
-                    camera=camera,
-                    writer=writer,
-                    clock=clock,
-                    moves=moves,
-                    frame_rate_hz=10.0,
-                    ground_truth=fake.pose_world,
-                    progress=progress,
-                )
+                result = record_session(rig, writer, moves, settings, progress=progress)
     return fake, result
 
 
@@ -213,3 +208,41 @@ def test_random_moves() -> None:
     assert fixed == [Move(0.5, 0.2)] * 3
     endless: Iterator[Move] = random_moves(np.random.default_rng(0), None, (0.1, 0.2))
     assert len([next(endless) for _ in range(1000)]) == 1000
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        RecordSettings(frame_rate_hz=10.0, encoding="png", png_level=0),
+        RecordSettings(frame_rate_hz=10.0, encoding="png", png_level=3),
+        RecordSettings(frame_rate_hz=10.0, encoding="bgr8"),
+    ],
+)
+def test_frames_are_stored_losslessly(tmp_path: Path, settings: RecordSettings) -> None:
+    path = tmp_path / "s.mcap"
+    camera = _StillCamera()
+    _run(path, [Move(0.2, 0.05)], camera=camera, settings=settings)
+    frames = [m for m in _read(path) if m.topic == "/camera/panorama"]
+    assert len(frames) == camera.reads >= 2
+    for m in frames:
+        msg = m.decode()
+        validate(m.schema, msg, what=m.topic)
+        data = np.frombuffer(base64.b64decode(msg["data"]), np.uint8)
+        if settings.encoding == "png":
+            assert m.schema == "foxglove.CompressedImage" and msg["format"] == "png"
+            image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        else:
+            assert m.schema == "foxglove.RawImage" and msg["step"] == 3 * msg["width"]
+            image = data.reshape(msg["height"], msg["width"], 3)
+        assert np.array_equal(image, camera.image)
+
+
+def test_record_settings_are_checked() -> None:
+    with pytest.raises(ValueError, match="frame rate must be > 0 Hz"):
+        RecordSettings(frame_rate_hz=0.0)
+    with pytest.raises(ValueError, match="encoding must be one of"):
+        RecordSettings(encoding="jpeg")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"PNG level must be 0\.\.3"):
+        RecordSettings(png_level=9)
+    with pytest.raises(ValueError, match="poll period"):
+        RecordSettings(poll_s=0.0)

@@ -73,7 +73,7 @@ def outcomes(log: Log) -> list[tuple[str, str, int]]:
 def test_each_command(
     robot: KheperaRobot, fake: FakeKhepera, clock: VirtualClock, log: Log
 ) -> None:
-    assert robot.version() == "5.02,sim"
+    assert robot.version() == "5.02,5.01"
     robot.set_speed(3, -3)
     assert robot.read_speed() == (3, -3)
     status = robot.motion_status()
@@ -89,7 +89,8 @@ def test_each_command(
     assert (status.left_error, status.right_error) == (200, 200)
     assert robot.read_speed() == (20, 20)
     clock.advance_ns(100_000_000)
-    assert robot.motion_status().on_target
+    status = robot.motion_status()  # done: on target, back in speed control, no error
+    assert status.on_target and not status.left_position_mode and status.left_error == 0
     assert robot.read_position_counters() == (300, 150)
     sent = ["B", "D,3,-3", "E", "K", "D,0,0", "E", "K", "G,100,-50", "H", "C,300,150", "K", "E"]
     sent += ["K", "H"]
@@ -152,7 +153,7 @@ def test_protocol_error_is_not_retried(robot: KheperaRobot, fake: FakeKhepera, l
         robot.set_speed(1, 1)
     assert outcomes(log) == [("D,1,1", "protocol_error", 1)]
     assert log[0]["reply"] == "z,Protocol error"
-    assert robot.version() == "5.02,sim"  # the line is still usable
+    assert robot.version() == "5.02,5.01"  # the line is still usable
     assert fake.requests == ["D,1,1", "B"]
 
 
@@ -199,7 +200,7 @@ def test_missing_port(tmp_path: Path, clock: VirtualClock) -> None:
 def test_busy_port(robot: KheperaRobot, config: RobotConfig, clock: VirtualClock) -> None:
     with pytest.raises(SerialPortError, match="is busy"):
         KheperaRobot.open(config, clock)
-    assert robot.version() == "5.02,sim"  # the first user is unaffected
+    assert robot.version() == "5.02,5.01"  # the first user is unaffected
 
 
 def test_unknown_url_scheme(clock: VirtualClock) -> None:
@@ -234,3 +235,40 @@ def test_session_dict_matches_the_session_schema() -> None:
     doc = RobotConfig(port="/dev/ttyUSB0", baudrate=115200).session_dict()
     jsonschema.validate(doc, robot_schema)
     assert doc["baudrate"] == 115200 and doc["stopbits"] == 2
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"baudrate": 14400}, r"runs at 9600, 19200, 38400, 57600, 115200 baud, not 14400"),
+        ({"move_speed": 128}, r"move speed 128 exceeds the Khepera II maximum of 127"),
+    ],
+)
+def test_settings_a_khepera_cannot_use_are_refused(
+    config: RobotConfig,
+    clock: VirtualClock,
+    fake: FakeKhepera,
+    change: dict[str, int],
+    message: str,
+) -> None:
+    with pytest.raises(RobotConfigError, match=message):
+        KheperaRobot.open(dataclasses.replace(config, **change), clock)
+    assert fake.requests == []  # refused before anything was sent
+
+
+@pytest.mark.parametrize("baudrate", [9600, 19200, 38400, 57600, 115200])
+def test_every_khepera_baud_rate_opens(
+    config: RobotConfig, clock: VirtualClock, baudrate: int
+) -> None:
+    with KheperaRobot.open(dataclasses.replace(config, baudrate=baudrate), clock) as robot:
+        assert robot.version() == "5.02,5.01"
+
+
+def test_version_needs_bios_and_protocol_fields(
+    robot: KheperaRobot, log: Log, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("recorder.sim.fake_khepera.VERSION_FIELDS", ("5.02",))
+    with pytest.raises(GarbledReply, match="'B'"):
+        robot.version()
+    assert [o for _, o, _ in outcomes(log)] == ["garbled"] * 3
+    assert "should carry 2 fields" in log[0]["detail"]

@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
+from recorder.moves import Move
 from recorder.sim.planner import MovePlanner, PlanError
-from recorder.sim.scenario import Move, Trajectory, builtin_scenario
+from recorder.sim.scenario import Trajectory, builtin_scenario
 from recorder.sim.world import Arena, Pose
 
 

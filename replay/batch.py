@@ -1,0 +1,90 @@
+"""Many logs at once: expand folders and globs into logs, plan one job per log.
+
+:func:`process_job` is the picklable per-log function that :func:`replay.parallel.run_tasks`
+runs in process, on a local process pool or on a Dask cluster; a log that fails (not MCAP,
+unfinished, ...) becomes a failed outcome there and does not stop the others.
+"""
+
+from __future__ import annotations
+
+import glob
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from data_schemas.errors import LogError
+from replay.records import MethodConfig
+
+DERIVED_SUFFIX = ".derived.mcap"
+SUMMARY_SUFFIX = ".summary.json"
+
+
+class NoLogsError(LogError):
+    """The command line names no existing log."""
+
+
+@dataclass(frozen=True)
+class LogJob:
+    """One log to process and where its outputs go (None: not written)."""
+
+    log: Path
+    out: Path | None
+    summary: Path | None
+    method: MethodConfig
+
+
+def expand_logs(args: Sequence[str]) -> list[Path]:
+    """Logs named by ``args``: files, folders (their ``*.mcap``) and glob patterns, in order.
+
+    Derived logs (``*.derived.mcap``) found in folders or globs are left out.
+    """
+    logs: list[Path] = []
+    for arg in args:
+        path = Path(arg)
+        if path.is_dir():
+            found = sorted(path.glob("*.mcap"))
+        elif any(c in arg for c in "*?["):
+            found = sorted(Path(p) for p in glob.glob(arg, recursive=True))
+        else:
+            if not path.exists():
+                raise NoLogsError(f"{arg}: no such file or folder")
+            logs.append(path)
+            continue
+        found = [p for p in found if not p.name.endswith(DERIVED_SUFFIX)]
+        if not found:
+            raise NoLogsError(f"{arg}: no .mcap log found there")
+        logs.extend(found)
+    unique = list(dict.fromkeys(logs))
+    if not unique:
+        raise NoLogsError("no log given")
+    return unique
+
+
+def plan_jobs(
+    logs: Sequence[Path], out: Path | None, summary: Path | None, method: MethodConfig
+) -> list[LogJob]:
+    """One job per log. One log: ``out``/``summary`` are files; many: folders (created)."""
+    if len(logs) == 1:
+        return [LogJob(logs[0], out, summary, method)]
+    for folder in (out, summary):
+        if folder is not None:
+            if folder.exists() and not folder.is_dir():
+                raise NoLogsError(f"{folder}: with many logs, --out and --summary are folders")
+            folder.mkdir(parents=True, exist_ok=True)
+    return [
+        LogJob(
+            log,
+            None if out is None else out / (log.stem + DERIVED_SUFFIX),
+            None if summary is None else summary / (log.stem + SUMMARY_SUFFIX),
+            method,
+        )
+        for log in logs
+    ]
+
+
+def process_job(job: LogJob) -> dict[str, Any]:
+    """Process one log; return its summary document (a module-level function, for pools)."""
+    from replay.process import process_log
+
+    return process_log(job.log, job.method, out=job.out, summary=job.summary)

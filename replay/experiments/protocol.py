@@ -1,0 +1,118 @@
+"""The experiment protocol: what a run does (methods, particle counts) and what it varies.
+
+:class:`Protocol` defaults are the paper's (METHOD.md section 7): 40 runs of 10 straight
+movements, n_r = 50, n_l = 300, eps = 3°, four landmarks with |L1 L2| = 30 cm in a 105 x 68 cm
+arena (the geometry lives in the scenario). A sweep changes one :data:`SWEEP_PARAMS` entry.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+from data_schemas.errors import BslamError
+
+PRIORS = ("impartial", "gaussian", "mixture")
+FRAME_CHANGES = ("sampled", "exact")
+#: the paper's Fig. 8 particle counts
+PAPER_N_L_VALUES = (50, 100, 200, 300, 500, 1000)
+
+
+class ProtocolError(BslamError):
+    """An experiment was asked for with impossible parameters."""
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """How every run of one experiment configuration is made and scored.
+
+    Attributes
+    ----------
+    runs : int
+        Number of simulated trajectories.
+    movements : int
+        Straight movements per trajectory.
+    n_r, n_l : int
+        Particles per landmark in FR and in FL.
+    priors : tuple of str
+        Single-view priors compared over all movements (each with ``n_l``).
+    n_l_values : tuple of int
+        Particle counts of the Fig. 8 sweep (impartial prior, first ``n_l_movements`` movements).
+    n_l_movements : int
+        Movements scored in the n_l sweep (the paper: 3).
+    batch_ls, crb : bool
+        Also score batch least squares and the Cramér–Rao bound on the same bearings.
+    frame_change : str
+        ``sampled`` (n_l random triples, O(n_l)) or ``exact`` (all n_r^3 triples, reduced).
+    seed : int
+        Run ``i`` uses seed ``seed + i`` for the trajectory, the noise and the particles.
+    """
+
+    runs: int = 40
+    movements: int = 10
+    n_r: int = 50
+    n_l: int = 300
+    priors: tuple[str, ...] = PRIORS
+    n_l_values: tuple[int, ...] = PAPER_N_L_VALUES
+    n_l_movements: int = 3
+    batch_ls: bool = True
+    crb: bool = True
+    frame_change: str = "sampled"
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.runs < 1 or self.movements < 1:
+            raise ProtocolError(
+                f"runs and movements must be at least 1, got {self.runs} and {self.movements}"
+            )
+        if self.n_r < 2 or self.n_l < 2 or any(n < 2 for n in self.n_l_values):
+            raise ProtocolError("particle counts n_r and n_l must be at least 2")
+        unknown = [p for p in self.priors if p not in PRIORS]
+        if unknown or not self.priors:
+            raise ProtocolError(f"unknown prior(s) {unknown}; choose from {', '.join(PRIORS)}")
+        if self.frame_change not in FRAME_CHANGES:
+            choices = ", ".join(FRAME_CHANGES)
+            raise ProtocolError(f"unknown frame change {self.frame_change!r}; use one of {choices}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The protocol as JSON-ready data (tuples become lists)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+def _set_bearing_noise(scenario: dict[str, Any], value: float) -> None:
+    scenario["camera"]["bearing_noise_deg"] = value
+
+
+def _set_vision_error(scenario: dict[str, Any], value: float) -> None:
+    scenario["vision_error_deg"] = value
+
+
+def _set_movement_length(scenario: dict[str, Any], value: float) -> None:
+    scenario["trajectory"]["distance"] = [0.8 * value, 1.2 * value]
+
+
+#: scenario parameters a sweep can vary -> how to set them (value in the parameter's unit)
+SWEEP_PARAMS = {
+    "bearing_noise_deg": _set_bearing_noise,
+    "vision_error_deg": _set_vision_error,
+    "movement_length_m": _set_movement_length,
+}
+#: parameters that change the protocol rather than the scenario
+PROTOCOL_PARAMS = ("frame_change", "camera_model", "n_l")
+
+
+def apply_scenario_param(scenario: dict[str, Any], param: str, value: float) -> dict[str, Any]:
+    """A copy of ``scenario`` with one sweep parameter set."""
+    out = copy.deepcopy(scenario)
+    SWEEP_PARAMS[param](out, value)
+    return out
+
+
+def apply_protocol_param(protocol: Protocol, param: str, value: str) -> Protocol:
+    """A copy of ``protocol`` with ``frame_change`` or ``n_l`` set (string value from the CLI)."""
+    if param == "frame_change":
+        return replace(protocol, frame_change=value)
+    if param == "n_l":
+        return replace(protocol, n_l=int(value))
+    raise ProtocolError(f"{param!r} is not a protocol parameter")

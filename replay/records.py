@@ -1,0 +1,222 @@
+"""Typed results of the offline stages, as sinks receive them.
+
+The runner (:mod:`replay.stages`) turns a log into a stream of these records; sinks (summary,
+derived MCAP, Rerun) only read them. Arrays are plain numpy with frame and unit in the name, so
+a sink never needs the estimator's internals.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.errors import EstimationError
+from data_schemas.session import Session
+from pipeline.priors import PriorName
+from replay.truth import Truth
+
+PRIORS: tuple[PriorName, ...] = ("impartial", "gaussian", "mixture")
+
+
+@dataclass(frozen=True)
+class MethodConfig:
+    """Estimator settings of one run (``bslam process`` options).
+
+    Attributes
+    ----------
+    prior : {"impartial", "gaussian", "mixture"}
+        Density of one observation (the paper's impartial PDF or a baseline).
+    n_r, n_l : int
+        Particles per landmark in FR (after one movement) and in FL (the belief).
+    seed : int
+        Seed of the run's ``numpy.random.Generator``.
+    """
+
+    prior: str = "impartial"
+    n_r: int = 50
+    n_l: int = 300
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.prior not in PRIORS:
+            raise EstimationError(f"unknown prior {self.prior!r}; use one of {', '.join(PRIORS)}")
+
+    @property
+    def prior_name(self) -> PriorName:
+        """The prior, typed for :mod:`pipeline`."""
+        return cast(PriorName, self.prior)
+
+    def summary(self, vision_error_rad: float) -> dict[str, Any]:
+        """The summary's ``method`` block."""
+        return {
+            "prior": self.prior,
+            "n_r": self.n_r,
+            "n_l": self.n_l,
+            "vision_error_deg": round(float(np.degrees(vision_error_rad)), 9),
+            "seed": self.seed,
+        }
+
+
+@dataclass(frozen=True)
+class DetectionRecord:
+    """One landmark in one frame (mirrors ``pipeline.bearings.Detection``)."""
+
+    name: str
+    visible: bool
+    bearing_rad: float | None
+    width_rad: float
+    confidence: float
+    n_pixels: int
+    n_blobs: int
+    reason: str | None
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """Bearings of one decoded frame.
+
+    Attributes
+    ----------
+    timestamp_ns : int
+        The frame's sensor time stamp.
+    log_time_ns : int
+        When the recorder wrote it.
+    keyframe : (index, phase) or None
+        The movement keyframe this frame is, if any.
+    detections : dict name -> DetectionRecord
+        Every catalog landmark, in catalog order.
+    image_bgr : (H, W, 3) uint8 or None
+        The decoded frame, kept only when a sink asked for images.
+    masks : dict name -> (H, W) bool, or None
+        Colour masks, kept only when a sink asked for them.
+    png : bytes or None
+        The frame's PNG file as logged (None for raw frames), kept with ``image_bgr`` so a sink
+        can pass the frame on without encoding it again.
+    """
+
+    timestamp_ns: int
+    log_time_ns: int
+    keyframe: tuple[int, str] | None
+    detections: Mapping[str, DetectionRecord]
+    image_bgr: NDArray[np.uint8] | None = None
+    masks: Mapping[str, NDArray[np.bool_]] | None = None
+    png: bytes | None = None
+
+
+@dataclass(frozen=True)
+class EstimateRecord:
+    """One landmark's estimate in FL.
+
+    Attributes
+    ----------
+    mean_fl : (2,) float
+        Particle mean, FL (unit |L1 L2|).
+    cov_fl : (2, 2) float
+        Particle covariance, FL.
+    ellipse80_fl : (k, 2) float
+        Closed outline of the 80% credible region, FL.
+    """
+
+    mean_fl: NDArray[np.float64]
+    cov_fl: NDArray[np.float64]
+    ellipse80_fl: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MovementRecord:
+    """What one straight movement produced (or why it was skipped).
+
+    Attributes
+    ----------
+    index : int
+        Movement index.
+    timestamp_ns, log_time_ns : int
+        Of the end keyframe (or of the last frame seen when it is missing).
+    status : str
+        ``"ok"`` or ``"skipped: <reason>"``.
+    bearings_rad : dict name -> (start, end)
+        Keyframe bearings used (None where not visible), every catalog landmark.
+    skipped_landmarks : dict name -> reason
+        Landmarks this movement could not initialise (not visible, degenerate geometry).
+    cones_fr : dict name -> (cone at O1, cone at O2)
+        Vision cone polygons (k, 2) in FR.
+    particles_fr : dict name -> (n_r, 2)
+        Landmark particles in FR (O1 = (0, 0), O2 = (1, 0)).
+    particles_fl : dict name -> (n_l, 2)
+        The belief in FL after this movement (every landmark seen so far).
+    o1_fl, o2_fl : (n, 2) or None
+        This movement's observation points in FL.
+    estimates : dict name -> EstimateRecord
+        The map after this movement.
+    """
+
+    index: int
+    timestamp_ns: int
+    log_time_ns: int
+    status: str
+    bearings_rad: Mapping[str, tuple[float | None, float | None]]
+    skipped_landmarks: Mapping[str, str] = field(default_factory=dict)
+    cones_fr: Mapping[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
+        default_factory=dict
+    )
+    particles_fr: Mapping[str, NDArray[np.float64]] = field(default_factory=dict)
+    particles_fl: Mapping[str, NDArray[np.float64]] = field(default_factory=dict)
+    o1_fl: NDArray[np.float64] | None = None
+    o2_fl: NDArray[np.float64] | None = None
+    estimates: Mapping[str, EstimateRecord] = field(default_factory=dict)
+    truth_o1_world: NDArray[np.float64] | None = None
+    truth_o2_world: NDArray[np.float64] | None = None
+
+    @property
+    def ok(self) -> bool:
+        """True if the movement updated the map."""
+        return self.status == "ok"
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What every sink learns before the first record.
+
+    Attributes
+    ----------
+    log_name : str
+        The log's file name (for messages and the summary).
+    session : Session
+        The log's session metadata.
+    method : MethodConfig
+        Estimator settings.
+    truth : Truth or None
+        Simulation truth, for simulated logs.
+    """
+
+    log_name: str
+    session: Session
+    method: MethodConfig
+    truth: Truth | None
+
+
+class Sink(Protocol):
+    """Receives the stages' results of one log, in log-time order.
+
+    ``wants_all_frames``: the runner decodes every frame (not only keyframes) for this sink.
+    ``wants_images``: frames carry ``image_bgr``, ``masks`` and (PNG frames) ``png``.
+    """
+
+    wants_all_frames: bool
+    wants_images: bool
+
+    def start(self, run: RunInfo) -> None:
+        """Called once, before any record."""
+
+    def frame(self, frame: FrameRecord) -> None:
+        """One decoded frame's bearings."""
+
+    def movement(self, record: MovementRecord) -> None:
+        """One movement, in index order, after its end keyframe."""
+
+    def finish(self) -> None:
+        """Called once at the end (also after an error, to release files)."""

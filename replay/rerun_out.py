@@ -1,0 +1,80 @@
+"""``bslam replay`` as a library call: one log through the stages into a Rerun recording."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import rerun as rr
+
+from data_schemas.errors import BslamError
+from replay.blueprint import method_blueprint
+from replay.logs import ProcessableLog
+from replay.process import process_log
+from replay.records import PRIORS, MethodConfig
+from replay.sinks.rerun_sink import RerunSink
+
+APPLICATION_ID = "bearing-slam"
+
+
+class ViewerError(BslamError):
+    """The Rerun viewer or server could not be started or reached."""
+
+
+@dataclass(frozen=True)
+class RerunTarget:
+    """Where the recording goes: a file, a spawned viewer, a running viewer, or a server."""
+
+    kind: Literal["save", "spawn", "connect", "serve"]
+    where: str | None = None
+
+
+def open_recording(name: str, target: RerunTarget) -> tuple[rr.RecordingStream, str | None]:
+    """A recording stream connected to ``target``; also the server URL when serving."""
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=name)
+    blueprint = method_blueprint(fig1_priors=PRIORS)
+    url = None
+    try:
+        if target.kind == "save":
+            assert target.where is not None
+            rec.save(target.where, default_blueprint=blueprint)
+        elif target.kind == "spawn":
+            rec.spawn(default_blueprint=blueprint)
+        elif target.kind == "connect":
+            rec.connect_grpc(target.where, default_blueprint=blueprint)
+        else:
+            url = rec.serve_grpc(default_blueprint=blueprint)
+    except (RuntimeError, OSError) as exc:
+        raise ViewerError(f"cannot open the Rerun {target.kind} target ({exc})") from None
+    return rec, url
+
+
+def replay_log(
+    log: str | os.PathLike[str] | ProcessableLog,
+    method: MethodConfig,
+    rec: rr.RecordingStream,
+    *,
+    images: bool = True,
+    out: str | os.PathLike[str] | None = None,
+    summary: str | os.PathLike[str] | None = None,
+) -> dict[str, Any]:
+    """Stream every stage of ``log`` to ``rec`` (and Fig. 1); return the summary document.
+
+    ``out`` and ``summary``, if given, also receive the derived log and the summary JSON.
+    """
+    sink = RerunSink(rec, images=images)
+    return process_log(log, method, out=out, summary=summary, extra_sinks=(sink,))
+
+
+def save_rrd(
+    log: str | os.PathLike[str], method: MethodConfig, rrd: str | os.PathLike[str], **kw: Any
+) -> dict[str, Any]:
+    """Replay ``log`` into the file ``rrd`` (finished and closed on return)."""
+    with ProcessableLog(log) as opened:  # a bad log fails here, before the .rrd exists
+        rec, _ = open_recording(Path(log).stem, RerunTarget("save", os.fspath(rrd)))
+        try:
+            return replay_log(opened, method, rec, **kw)
+        finally:
+            rec.disconnect()

@@ -1,0 +1,1 @@
+"""Sinks of the offline stages: summary JSON, derived MCAP log, Rerun recording."""

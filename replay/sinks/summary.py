@@ -1,0 +1,112 @@
+"""The summary sink: one JSON document per log, in the contract of ``docs/replay.md``.
+
+``frame`` names the reference pair, ``method`` the settings, ``movements[k]`` the keyframe
+bearings used (degrees, [-180, 180)) and the belief after movement k, ``landmarks`` the final
+map (FL, unit |L1 L2|; the reference pair is the frame, so it is not listed). For simulated logs
+``truth`` gives the true positions in FL and ``error_m`` the distance of each estimate to them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.angles import wrap_rad
+from replay.records import EstimateRecord, FrameRecord, MovementRecord, RunInfo
+
+DIGITS = 9
+
+
+def _num(x: float) -> float:
+    return round(float(x), DIGITS)
+
+
+def _xy(p: NDArray[np.floating]) -> list[float]:
+    return [_num(p[0]), _num(p[1])]
+
+
+def _bearing_deg(b: float | None) -> float | None:
+    return None if b is None else round(math.degrees(wrap_rad(b)), 6)
+
+
+def _estimate(e: EstimateRecord) -> dict[str, Any]:
+    c = e.cov_fl
+    return {"mean": _xy(e.mean_fl), "cov": [_xy(c[0]), _xy(c[1])]}
+
+
+class SummarySink:
+    """Builds the summary document; read it from :attr:`document` after ``finish``."""
+
+    wants_all_frames = False
+    wants_images = False
+
+    def __init__(self) -> None:
+        self.document: dict[str, Any] = {}
+        self._run: RunInfo | None = None
+        self._landmarks: dict[str, Any] = {}
+        self._errors_m: dict[str, float] = {}
+
+    def start(self, run: RunInfo) -> None:
+        self._run = run
+        s = run.session
+        self.document = {
+            "log": run.log_name,
+            "frame": {"origin": s.reference[0], "x_axis": s.reference[1]},
+            "method": run.method.summary(s.vision_error_rad),
+            "camera_model": s.calibration.model,
+            "simulated": s.simulated,
+            "movements": [],
+            "landmarks": {},
+        }
+        if run.truth is not None:
+            self.document["truth"] = {
+                "unit_m": _num(run.truth.to_fl.unit_m),
+                "landmarks": {k: _xy(v) for k, v in run.truth.landmarks_fl().items()},
+            }
+
+    def frame(self, frame: FrameRecord) -> None:
+        """Frames are not part of the summary."""
+
+    def movement(self, record: MovementRecord) -> None:
+        assert self._run is not None
+        reference = self._run.session.reference
+        entry: dict[str, Any] = {
+            "index": record.index,
+            "status": record.status,
+            "bearings_deg": {
+                name: [_bearing_deg(b1), _bearing_deg(b2)]
+                for name, (b1, b2) in record.bearings_rad.items()
+            },
+        }
+        if record.skipped_landmarks:
+            entry["skipped_landmarks"] = dict(record.skipped_landmarks)
+        if record.ok:
+            self._landmarks = {
+                name: _estimate(e) for name, e in record.estimates.items() if name not in reference
+            }
+            if record.o1_fl is not None and record.o2_fl is not None:
+                entry["observation_points"] = {
+                    "o1": _xy(record.o1_fl.mean(axis=0)),
+                    "o2": _xy(record.o2_fl.mean(axis=0)),
+                }
+            if self._run.truth is not None:
+                truth = self._run.truth
+                self._errors_m = {
+                    name: truth.error_m(name, e.mean_fl)
+                    for name, e in record.estimates.items()
+                    if name not in reference and name in truth.landmarks_world
+                }
+        entry["landmarks"] = self._landmarks
+        if self._run.truth is not None and self._errors_m:
+            entry["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}
+            entry["mean_error_m"] = _num(float(np.mean(list(self._errors_m.values()))))
+        self.document["movements"].append(entry)
+
+    def finish(self) -> None:
+        self.document["landmarks"] = self._landmarks
+        if self._errors_m:
+            self.document["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}
+            self.document["mean_error_m"] = _num(float(np.mean(list(self._errors_m.values()))))

@@ -1,0 +1,98 @@
+"""Benchmark: ``bslam process`` on a 10-movement, 4-landmark log, whole process.
+
+Yardstick: a process that imports the same libraries (``replay.process`` and what it pulls in)
+and reads the log (every message, JSON-decoded), measured in the same run. Goal: process at
+most 1.5x the yardstick; ``bslam replay --save`` (Rerun output) at most 1 s in total.
+Run with ``python -m pytest tests/bench/test_bench_process.py``.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+ROUNDS = 7
+
+YARDSTICK = """
+import json, sys
+import replay.process  # the same libraries as `bslam process`
+from mcap.reader import make_reader
+with open(sys.argv[1], "rb") as f:
+    for _, _, message in make_reader(f).iter_messages(log_time_order=True):
+        json.loads(message.data)
+"""
+
+
+def _run(args: list[str]) -> None:
+    subprocess.run(args, check=True, env=ENV, capture_output=True, cwd=ROOT)
+
+
+@pytest.fixture(scope="module")
+def paper_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    log = tmp_path_factory.mktemp("bench") / "paper.mcap"
+    _run(
+        [
+            sys.executable,
+            "-m",
+            "replay.cli",
+            "simulate",
+            "--scenario",
+            "paper",
+            "--out",
+            str(log),
+            "--seed",
+            "7",
+        ]
+    )
+    return log
+
+
+RESULTS: dict[str, float] = {}
+
+
+def _bench(benchmark: Any, name: str, args: list[str]) -> None:
+    benchmark.pedantic(_run, args=(args,), rounds=ROUNDS, iterations=1, warmup_rounds=1)
+    RESULTS[name] = statistics.median(benchmark.stats.stats.data)
+    benchmark.extra_info["median_s"] = RESULTS[name]
+
+
+def test_yardstick_import_and_read(benchmark: Any, paper_log: Path) -> None:
+    _bench(benchmark, "yardstick", [sys.executable, "-c", YARDSTICK, str(paper_log)])
+
+
+def test_process_whole(benchmark: Any, paper_log: Path, tmp_path: Path) -> None:
+    summary = tmp_path / "s.json"
+    _bench(
+        benchmark,
+        "process",
+        [sys.executable, "-m", "replay.cli", "process", str(paper_log), "--summary", str(summary)],
+    )
+    ratio = RESULTS["process"] / RESULTS["yardstick"]
+    benchmark.extra_info["ratio_to_yardstick"] = ratio
+    print(
+        f"\nprocess {RESULTS['process']:.3f} s, yardstick {RESULTS['yardstick']:.3f} s, "
+        f"ratio {ratio:.2f} (goal <= 1.5)"
+    )
+
+
+def test_replay_with_rerun_output(benchmark: Any, paper_log: Path, tmp_path: Path) -> None:
+    rrd = tmp_path / "paper.rrd"
+    _bench(
+        benchmark,
+        "replay",
+        [sys.executable, "-m", "replay.cli", "replay", str(paper_log), "--save", str(rrd)],
+    )
+    ratio = RESULTS["replay"] / RESULTS["yardstick"]
+    benchmark.extra_info["ratio_to_yardstick"] = ratio
+    print(
+        f"\nreplay --save {RESULTS['replay']:.3f} s in total (goal <= 1 s), "
+        f"ratio {ratio:.2f} to the yardstick"
+    )

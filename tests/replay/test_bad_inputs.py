@@ -1,0 +1,82 @@
+"""Each bad input gives exit 1 and one clear line (through click's CliRunner)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from logfactory import session_doc, write_log
+from mcap.writer import Writer
+
+from replay.cli import cli
+
+
+def _raw_mcap(path: Path, metadata: dict[str, str] | None, schema: str = "bslam.Movement") -> Path:
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        if metadata is not None:
+            w.add_metadata("bslam.session", metadata)
+        sid = w.register_schema(schema, "jsonschema", b"{}")
+        cid = w.register_channel(
+            "/acme" if schema != "bslam.Movement" else "/robot/movement", "json", sid
+        )
+        w.add_message(cid, 1, b"{}", 1)
+        w.finish()
+    return path
+
+
+def _no_calibration() -> dict[str, str]:
+    doc = session_doc()
+    del doc["camera"]["calibration"]
+    return {"json": json.dumps(doc)}
+
+
+def _bad(tmp_path: Path, kind: str) -> Path:
+    if kind == "not-mcap":
+        p = tmp_path / "notes.mcap"
+        p.write_text("hello, not a log\n")
+        return p
+    if kind == "unfinished":
+        return write_log(tmp_path / "cut.mcap", finish=False)
+    if kind == "no-metadata":
+        return _raw_mcap(tmp_path / "bare.mcap", None)
+    if kind == "no-calibration":
+        return _raw_mcap(tmp_path / "nocal.mcap", _no_calibration())
+    if kind == "unknown-schema":
+        return _raw_mcap(tmp_path / "acme.mcap", {"json": json.dumps(session_doc())}, "acme.Widget")
+    if kind == "missing":
+        return tmp_path / "nowhere.mcap"
+    raise AssertionError(kind)
+
+
+EXPECTED = {
+    "not-mcap": "is not an MCAP file",
+    "unfinished": "bslam recover",
+    "no-metadata": "no 'bslam.session'",
+    "no-calibration": "no camera calibration",
+    "unknown-schema": "'acme.Widget', which this version of bearing-slam does not know",
+    "missing": "no such file",
+}
+
+
+@pytest.mark.parametrize("command", ["process", "replay"])
+@pytest.mark.parametrize("kind", sorted(EXPECTED))
+def test_bad_log_is_one_line_exit_1(tmp_path: Path, kind: str, command: str) -> None:
+    log = _bad(tmp_path, kind)
+    args = [command, str(log)]
+    if command == "replay":
+        args += ["--save", str(tmp_path / "out.rrd")]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1, result.output
+    assert lines[0].startswith("Error: ")
+    assert EXPECTED[kind].lower() in lines[0].lower()
+
+
+def test_bad_option_is_usage_error(small_log: Path) -> None:
+    result = CliRunner().invoke(cli, ["process", str(small_log), "--prior", "flat"])
+    assert result.exit_code == 2

@@ -1,0 +1,179 @@
+"""`bslam experiment`: a tiny paper experiment end to end, and bad input (exit 1, one line)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from replay.cli import COMMANDS, cli
+from replay.experiments.results import read_results
+from replay.experiments.stats import movement_curve
+
+needs_simulate = pytest.mark.skipif(
+    "simulate" not in COMMANDS, reason="`bslam simulate` (recorder branch) is not merged yet"
+)
+
+
+@needs_simulate
+def test_tiny_paper_experiment_end_to_end(tmp_path: Path) -> None:
+    out = tmp_path / "exp"
+    args = [
+        "experiment",
+        "paper",
+        "--out",
+        str(out),
+        "--runs",
+        "3",
+        "--movements",
+        "4",
+        "--n-l",
+        "100",
+        "--n-l-values",
+        "50,100",
+        "--workers",
+        "1",
+        "--seed",
+        "5",
+        "--quiet",
+    ]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    assert "3/3 runs ok" in result.output
+    res = read_results(out)
+    assert [r.status for r in res.runs] == ["ok"] * 3
+    # every run's log, its summary and its scenario are kept for replay
+    for r in res.runs:
+        log = Path(r.log)
+        assert log.stat().st_size > 0
+        summary = json.loads(log.with_suffix(".summary.json").read_text())
+        assert len(summary["movements"]) == 4
+    methods = {r.method for r in res.rows}
+    assert methods == {"impartial", "gaussian", "mixture", "batch_ls", "crb"}
+    # shape: 3 runs x 4 movements x 2 scored landmarks per method (n_l sweep: 3 movements)
+    main = [r for r in res.rows if r.method == "impartial" and r.n_l == 100]
+    assert len(main) == 3 * 4 * 2
+    assert len([r for r in res.rows if r.method == "impartial" and r.n_l == 50]) == 3 * 3 * 2
+    last = [r for r in res.rows if r.movement == 4 and r.method != "crb"]
+    assert all(math.isfinite(r.error_cm) and 0 <= r.error_cm < 30 for r in last)
+    # errors fall with movements on average
+    for method in ("impartial", "mixture", "batch_ls"):
+        n_l = 100 if method != "batch_ls" else 0
+        curve = movement_curve(res.rows, method=method, n_l=n_l, landmarks=["L3", "L4"])
+        assert curve[4].mean < curve[1].mean, method
+    for name in (
+        "fig1_priors.png",
+        "fig7_movements.png",
+        "fig8_n_l.png",
+        "methods.png",
+        "experiment.rrd",
+        "errors.csv",
+    ):
+        assert (out / name).stat().st_size > 0, name
+    report = (out / "report.md").read_text()
+    assert "| impartial PDF |" in report and "![Fig. 7" in report
+
+
+def run_cli(args: list[str]) -> tuple[int, str]:
+    result = CliRunner().invoke(cli, args)
+    return result.exit_code, result.output
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--n-l-values", "50,abc"], "--n-l-values: expected comma-separated integers"),
+        (["--priors", "impartial,flat"], "unknown prior(s) ['flat']"),
+        (["--runs", "0"], "runs and movements must be at least 1"),
+        (["--frame-change", "fast"], "unknown frame change 'fast'"),
+        (["--scenario", "no/such/scenario.json"], "no/such/scenario.json"),
+    ],
+)
+def test_paper_bad_input_is_one_line_exit_1(tmp_path: Path, extra: list[str], message: str) -> None:
+    code, output = run_cli(["experiment", "paper", "--out", str(tmp_path / "o"), *extra])
+    assert code == 1, output
+    assert message in output
+    assert len(output.strip().splitlines()) == 1
+
+
+def test_out_is_a_file_and_unknown_sweep_param(tmp_path: Path) -> None:
+    f = tmp_path / "file"
+    f.write_text("x")
+    code, output = run_cli(["experiment", "paper", "--out", str(f)])
+    assert code == 1 and "is a file" in output and len(output.strip().splitlines()) == 1
+    code, output = run_cli(
+        ["experiment", "sweep", "--out", str(tmp_path / "s"), "--param", "speed", "--values", "1"]
+    )
+    assert code == 1 and "unknown sweep parameter 'speed'" in output
+    assert len(output.strip().splitlines()) == 1
+
+
+@needs_simulate
+def test_tiny_sweep_end_to_end_is_quiet(tmp_path: Path) -> None:
+    out = tmp_path / "sweep"
+    args = [
+        "experiment",
+        "sweep",
+        "--out",
+        str(out),
+        "--param",
+        "n_l",
+        "--values",
+        "40,80",
+        "--runs",
+        "2",
+        "--movements",
+        "4",
+        "--n-r",
+        "30",
+        "--priors",
+        "impartial,mixture",
+        "--workers",
+        "1",
+        "--quiet",
+    ]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    # the summary table and one line: no simulator output, no skipped-movement warnings
+    *table, last = result.output.strip().splitlines()
+    assert last.startswith("4/4 runs ok")
+    assert table[0].startswith("Mean error (cm) over runs after 3 / 4 movements")
+    assert [line[:7] for line in table[2:] if not line.startswith("|-")] == [
+        "| n_l |",
+        "| 40 | ",
+        "| 80 | ",
+    ]
+    res = read_results(out)
+    assert sorted({r.group for r in res.runs}) == ["n_l=40", "n_l=80"]
+    for value in (40, 80):
+        rows = [r for r in res.rows if r.group == f"n_l={value}" and r.method == "impartial"]
+        assert {r.n_l for r in rows} == {value}
+        assert len(rows) == 2 * 4 * 2  # runs x movements x scored landmarks
+        last = [r for r in rows if r.movement == 4]
+        assert all(math.isfinite(r.error_cm) and 0 <= r.error_cm < 30 for r in last)
+    assert {r.method for r in res.rows} == {"impartial", "mixture", "batch_ls", "crb"}
+    assert (out / "sweep_n_l.png").stat().st_size > 0
+    report = (out / "report.md").read_text()
+    tables = report.split("## n_l=")[1:]
+    assert [t.split("\n", 1)[0] for t in tables] == ["40", "80"]
+    for table in tables:  # every value's table has numbers for the swept prior
+        line = next(x for x in table.splitlines() if x.startswith("| impartial PDF |"))
+        assert "nan" not in line and line.split("|")[2].strip()[0].isdigit(), line
+
+
+@needs_simulate
+def test_run_that_cannot_be_simulated_is_reported_in_one_line(tmp_path: Path) -> None:
+    from replay.experiments.experiment import plan_runs, scenario_doc
+    from replay.experiments.protocol import Protocol, apply_scenario_param
+    from replay.experiments.run import run_one
+    from replay.parallel import run_tasks
+
+    doc = apply_scenario_param(scenario_doc("paper"), "movement_length_m", 2.0)  # arena: 1 m
+    (task,) = plan_runs(Protocol(runs=1, movements=2), doc, tmp_path, "too_long")
+    (outcome,) = run_tasks(run_one, [task], progress=False)
+    assert not outcome.ok and outcome.error is not None
+    assert outcome.error.startswith("move 0: no turn and distance in [1.6, 2.4] m")
+    assert "trajectory.distance" in outcome.error and "\n" not in outcome.error

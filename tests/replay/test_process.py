@@ -1,0 +1,204 @@
+"""``bslam process``: summary contract, derived log, skipped movements, many logs."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+from logfactory import MOVES, write_log
+from mcap.reader import make_reader
+
+from data_schemas.codec import validate_message
+from replay.batch import LogJob, expand_logs, plan_jobs, process_job
+from replay.cli import cli
+from replay.parallel import SchedulerError, run_tasks
+from replay.process import process_log
+from replay.records import MethodConfig
+
+
+def _check_contract(doc: dict[str, Any], n_movements: int) -> None:
+    assert doc["frame"] == {"origin": "L1", "x_axis": "L2"}
+    assert set(doc["method"]) >= {"prior", "n_r", "n_l", "vision_error_deg"}
+    assert [m["index"] for m in doc["movements"]] == list(range(n_movements))
+    for m in doc["movements"]:
+        assert m["status"] == "ok" or m["status"].startswith("skipped: ")
+        for pair in m["bearings_deg"].values():
+            assert len(pair) == 2
+            assert all(b is None or -180.0 <= b < 180.0 for b in pair)
+        for est in m["landmarks"].values():
+            assert len(est["mean"]) == 2
+            cov = est["cov"]
+            assert cov[0][1] == cov[1][0] and cov[0][0] > 0 and cov[1][1] > 0
+    assert "L1" not in doc["landmarks"] and "L2" not in doc["landmarks"]
+
+
+def test_summary_matches_contract_and_truth(small_log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "s.json"
+    result = CliRunner().invoke(cli, ["process", str(small_log), "--summary", str(out)])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(out.read_text())
+    _check_contract(doc, len(MOVES))
+    assert set(doc["landmarks"]) == {"L3", "L4"}
+    # the bearings used are the painted ones (bars are 5 px of a 1 deg/px panorama)
+    (x, y, h), _ = MOVES[0]
+    true_l4 = math.degrees(math.atan2(0.18 - y, 0.85 - x) - h)
+    assert doc["movements"][0]["bearings_deg"]["L4"][0] == pytest.approx(true_l4, abs=1.0)
+    # the final map is near the truth mapped to FL (a few cm at |L1 L2| = 0.3 m)
+    for name, est in doc["landmarks"].items():
+        truth = doc["truth"]["landmarks"][name]
+        err_m = math.dist(est["mean"], truth) * doc["truth"]["unit_m"]
+        assert err_m == pytest.approx(doc["error_m"][name], abs=1e-6)
+    assert doc["mean_error_m"] < 0.05
+
+
+def test_stdout_summary_is_the_same_document(small_log: Path, tmp_path: Path) -> None:
+    result = CliRunner().invoke(cli, ["process", str(small_log), "--seed", "3"])
+    assert result.exit_code == 0
+    again = process_log(small_log, MethodConfig(seed=3))
+    assert json.loads(result.output) == json.loads(json.dumps(again))
+
+
+def test_seed_changes_particles_not_contract(small_log: Path) -> None:
+    a = process_log(small_log, MethodConfig(seed=1))
+    b = process_log(small_log, MethodConfig(seed=2))
+    assert a["landmarks"]["L4"]["mean"] != b["landmarks"]["L4"]["mean"]
+    assert process_log(small_log, MethodConfig(seed=1)) == a
+
+
+def test_reference_hidden_skips_movement_and_goes_on(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "hidden.mcap", hidden=lambda i, ph: ("L1",) if i == 1 else ())
+    doc = process_log(log, MethodConfig())
+    statuses = [m["status"] for m in doc["movements"]]
+    assert statuses[0] == "ok" and statuses[2] == "ok"
+    assert statuses[1].startswith("skipped: ") and "L1" in statuses[1]
+    assert doc["movements"][1]["bearings_deg"]["L1"] == [None, None]
+    # a skipped movement leaves the belief as it was
+    assert doc["movements"][1]["landmarks"] == doc["movements"][0]["landmarks"]
+
+
+def test_occluded_landmark_is_reported_not_used(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "occl.mcap", hidden=lambda i, ph: ("L4",) if ph == "end" else ())
+    doc = process_log(log, MethodConfig())
+    assert all(m["status"] == "ok" for m in doc["movements"])
+    assert "L4" not in doc["landmarks"]
+    assert all("L4" in m["skipped_landmarks"] for m in doc["movements"])
+    assert all(m["bearings_deg"]["L4"][1] is None for m in doc["movements"])
+
+
+def test_derived_log_channels_validate(small_log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "d.mcap"
+    doc = process_log(small_log, MethodConfig(n_r=20, n_l=40), out=out)
+    counts: dict[str, int] = {}
+    with out.open("rb") as f:
+        reader = make_reader(f)
+        for _, channel, message in reader.iter_messages(log_time_order=True):
+            msg = json.loads(message.data)
+            validate_message(channel.topic, msg)
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.topic == "/pipeline/estimate" and msg["index"] == len(MOVES) - 1:
+                final = {lm["name"]: lm["mean"] for lm in msg["landmarks"]}
+            if channel.topic == "/pipeline/particles_fr":
+                assert all(len(s["x"]) == 20 for s in msg["landmarks"])
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert counts == {
+        "/pipeline/bearings": 2 * len(MOVES),
+        "/pipeline/particles_fr": len(MOVES),
+        "/pipeline/particles_fl": len(MOVES),
+        "/pipeline/estimate": len(MOVES),
+    }
+    for name, mean in final.items():
+        assert mean == pytest.approx(doc["landmarks"][name]["mean"], abs=1e-8)
+    assert json.loads(meta["bslam.session"]["json"])["derived"]["source"] == small_log.name
+
+
+def _hide_l1_in_movement_1(i: int, phase: str) -> tuple[str, ...]:
+    return ("L1",) if i == 1 else ()
+
+
+QUIET_RUN = """
+import sys
+from replay.process import process_log
+from replay.records import MethodConfig
+doc = process_log(sys.argv[1], MethodConfig())
+print(doc["movements"][1]["status"])
+"""
+
+
+def test_library_prints_nothing_for_skips(tmp_path: Path) -> None:
+    """As in an experiment run or a pool worker: no logging configured, nothing on stderr."""
+    log = write_log(tmp_path / "quiet.mcap", hidden=_hide_l1_in_movement_1)
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run(
+        [sys.executable, "-c", QUIET_RUN, str(log)],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+    )
+    assert done.stdout.startswith("skipped: ")
+    assert done.stderr == ""
+
+
+def test_one_log_reports_each_skipped_movement(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "hidden.mcap", hidden=_hide_l1_in_movement_1)
+    result = CliRunner().invoke(cli, ["process", str(log), "--summary", str(tmp_path / "s.json")])
+    assert result.exit_code == 0, result.output
+    warnings = [line for line in result.output.splitlines() if line.startswith("warning: ")]
+    assert len(warnings) == 1 and "hidden.mcap: movement 1 skipped: " in warnings[0]
+
+
+def test_many_logs_one_bad_one_line_each(tmp_path: Path) -> None:
+    folder = tmp_path / "many"
+    folder.mkdir()
+    for i in range(2):
+        write_log(folder / f"run{i}.mcap", hidden=_hide_l1_in_movement_1)
+    (folder / "broken.mcap").write_text("not a log")
+    result = CliRunner().invoke(
+        cli, ["process", str(folder), "--summary", str(tmp_path / "sums"), "--workers", "2"]
+    )
+    assert result.exit_code == 1
+    lines = [line for line in result.output.splitlines() if ".mcap: " in line]
+    assert len(lines) == 3, result.output  # one line per log, no per-movement warnings
+    assert "warning" not in result.output
+    broken = next(line for line in lines if "broken.mcap" in line)
+    assert "broken.mcap: FAILED: " in broken and "not an MCAP file" in broken
+    assert sum(f"2/{len(MOVES)} movements used" in line for line in lines) == 2
+    assert "1 of 3 logs failed" in result.output
+    assert sorted(p.name for p in (tmp_path / "sums").iterdir()) == [
+        "run0.summary.json",
+        "run1.summary.json",
+    ]
+
+
+def test_dask_local_cluster_gives_same_results(tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    logs = [write_log(tmp_path / f"d{i}.mcap") for i in range(2)]
+    jobs = plan_jobs(expand_logs([str(tmp_path / "d*.mcap")]), None, None, MethodConfig())
+    assert [j.log for j in jobs] == logs
+    local = [o.value for o in run_tasks(process_job, jobs, progress=False)]
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        remote = run_tasks(process_job, jobs, scheduler=cluster.scheduler_address, progress=False)
+    assert all(o.ok for o in remote)
+    assert [o.value for o in remote] == local
+
+
+def test_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
+    jobs = plan_jobs([write_log(tmp_path / "u.mcap")], None, None, MethodConfig())
+    with pytest.raises(SchedulerError, match=r"^cannot reach the Dask scheduler at tcp://127"):
+        run_tasks(process_job, jobs, scheduler="tcp://127.0.0.1:9", connect_timeout="1s")
+
+
+def test_job_is_picklable() -> None:
+    import pickle
+
+    job = LogJob(Path("a.mcap"), None, None, MethodConfig(prior="mixture"))
+    assert pickle.loads(pickle.dumps(job)) == job

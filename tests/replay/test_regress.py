@@ -1,0 +1,78 @@
+"""Regression on the stored logs of tests/data/regress (both cameras, degenerate, occluded)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from replay.cli import cli
+from replay.regress import compare
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "regress"
+
+
+def test_stored_logs_have_not_regressed() -> None:
+    result = CliRunner().invoke(cli, ["regress", str(DATA)])
+    assert result.exit_code == 0, result.output
+    for name in ("unwrapped", "omni", "degenerate", "occluded"):
+        assert f"{name}.mcap: ok" in result.output
+
+
+def test_stored_cases_cover_what_they_claim() -> None:
+    omni = json.loads((DATA / "omni.expected.json").read_text())
+    assert omni["camera_model"] == "omni"
+    degenerate = json.loads((DATA / "degenerate.expected.json").read_text())
+    assert "parallel" in degenerate["movements"][0]["skipped_landmarks"]["L4"]
+    occluded = json.loads((DATA / "occluded.expected.json").read_text())
+    assert occluded["movements"][0]["bearings_deg"]["L5"][1] is None
+    assert "L5" in occluded["landmarks"]
+
+
+def test_moved_estimate_is_a_readable_regression(tmp_path: Path) -> None:
+    for f in ("unwrapped.mcap", "unwrapped.expected.json"):
+        shutil.copy(DATA / f, tmp_path / f)
+    expected = tmp_path / "unwrapped.expected.json"
+    doc = json.loads(expected.read_text())
+    doc["landmarks"]["L4"]["mean"][0] += 0.01
+    doc["movements"][1]["status"] = "skipped: made up"
+    expected.write_text(json.dumps(doc))
+    result = CliRunner().invoke(cli, ["regress", str(tmp_path)])
+    assert result.exit_code == 1
+    assert "unwrapped.mcap: REGRESSION" in result.output
+    assert "final L4: mean moved by 0.01 (> 0.001)" in result.output
+    assert "movement 1: status was 'skipped: made up', now 'ok'" in result.output
+    assert "1 of 1 logs regressed" in result.output and "--update" in result.output
+    # --update rewrites the expected file on purpose; then it passes again
+    assert CliRunner().invoke(cli, ["regress", str(tmp_path), "--update"]).exit_code == 0
+    assert CliRunner().invoke(cli, ["regress", str(tmp_path)]).exit_code == 0
+
+
+def test_compare_lists_appearing_and_disappearing_landmarks() -> None:
+    est = {"mean": [1.0, 2.0], "cov": [[1e-3, 0.0], [0.0, 1e-3]]}
+    a = {
+        "movements": [{"index": 0, "status": "ok", "landmarks": {"L3": est}}],
+        "landmarks": {"L3": est},
+    }
+    b = {
+        "movements": [{"index": 0, "status": "ok", "landmarks": {"L4": est}}],
+        "landmarks": {"L4": est},
+    }
+    diffs = compare(a, b)
+    assert any("L3: disappeared" in d for d in diffs)
+    assert any("L4: new landmark" in d for d in diffs)
+    assert compare(a, a) == []
+    wider = {"mean": [1.0, 2.0], "cov": [[2e-3, 0.0], [0.0, 1e-3]]}
+    c = {"movements": [], "landmarks": {"L3": wider}}
+    assert any(
+        "covariance changed by 100.0%" in d
+        for d in compare({"movements": [], "landmarks": {"L3": est}}, c)
+    )
+
+
+def test_empty_folder_is_one_line(tmp_path: Path) -> None:
+    result = CliRunner().invoke(cli, ["regress", str(tmp_path)])
+    assert result.exit_code == 1
+    assert "no NAME.mcap with NAME.expected.json" in result.output

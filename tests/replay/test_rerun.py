@@ -1,0 +1,153 @@
+"""``bslam replay``: read the .rrd back with Rerun's own reader and check every stage."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pytest
+import rerun as rr
+from click.testing import CliRunner
+from logfactory import HEIGHT, MOVES
+
+from replay.cli import cli
+from replay.process import process_log
+from replay.records import MethodConfig
+
+
+def _read(rrd: Path) -> dict[str, list[dict[str, Any]]]:
+    """entity path -> rows (column name -> value) of every chunk, static and temporal."""
+    rows: dict[str, list[dict[str, Any]]] = {}
+    for chunk in rr.chunk.RrdReader(rrd).stream():
+        batch = chunk.to_record_batch()
+        columns = [
+            col.cast(pa.int64()) if pa.types.is_timestamp(col.type) else col
+            for col in batch.columns
+        ]
+        table = pa.RecordBatch.from_arrays(columns, names=batch.schema.names).to_pylist()
+        rows.setdefault(chunk.entity_path, []).extend(table)
+    return rows
+
+
+@pytest.fixture(scope="module")
+def replayed(
+    small_log: Path, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, dict[str, Any]]:
+    rrd = tmp_path_factory.mktemp("rrd") / "small.rrd"
+    result = CliRunner().invoke(cli, ["replay", str(small_log), "--save", str(rrd), "--n-l", "100"])
+    assert result.exit_code == 0, result.output
+    assert f"rerun {rrd}" in result.output
+    return rrd, process_log(small_log, MethodConfig(n_l=100))
+
+
+def _column(rows: list[dict[str, Any]], name: str) -> list[Any]:
+    return [r[name] for r in rows if r.get(name) is not None]
+
+
+def test_every_stage_is_an_entity(replayed: tuple[Path, dict[str, Any]]) -> None:
+    rows = _read(replayed[0])
+    for entity in [
+        "/camera/panorama",
+        "/camera/panorama/masks",
+        "/camera/panorama/detections",
+        "/bearings/L3",
+        "/fr/cones/L4",
+        "/fr/particles/L4",
+        "/map/particles/L4",
+        "/map/estimates",
+        "/map/ellipses/L4",
+        "/map/trajectory",
+        "/map/truth/landmarks",
+        "/map/truth/trajectory",
+        "/error/mean",
+        "/fig1/density/impartial",
+        "/fig1/density/gaussian",
+        "/fig1/density/mixture",
+        "/fig1/range/impartial",
+    ]:
+        assert entity in rows, entity
+
+
+def test_frames_and_masks(replayed: tuple[Path, dict[str, Any]]) -> None:
+    rows = _read(replayed[0])
+    n_frames = 4 * len(MOVES)  # two keyframes and two frames between per movement
+    assert len(_column(rows["/camera/panorama"], "EncodedImage:blob")) == n_frames
+    masks = _column(rows["/camera/panorama/masks"], "SegmentationImage:buffer")
+    assert len(masks) == n_frames
+    classes = set(np.concatenate([np.asarray(m[0], np.uint8) for m in masks]).tolist())
+    assert classes == {0, 1, 2, 3, 4}  # background and the four landmarks
+
+
+def test_detections_mark_every_bearing(replayed: tuple[Path, dict[str, Any]]) -> None:
+    rrd, doc = replayed
+    rows = [r for r in _read(rrd)["/camera/panorama/detections"] if "LineStrips2D:strips" in r]
+    assert len(rows) == 4 * len(MOVES)
+    for r in rows:
+        assert len(r["LineStrips2D:labels"]) == len(r["LineStrips2D:strips"]) == 4
+        for strip in r["LineStrips2D:strips"]:  # a vertical line across the unwrapped panorama
+            (u0, v0), (u1, v1) = strip
+            assert u0 == u1 and v0 == 0.0 and v1 == HEIGHT
+    labelled = sorted(
+        float(label.split()[1].rstrip("°"))
+        for r in rows
+        if r.get("movement") is not None
+        for label in r["LineStrips2D:labels"]
+        if label.startswith("L4 ")
+    )
+    used = sorted(b for m in doc["movements"] for b in m["bearings_deg"]["L4"])
+    assert labelled == pytest.approx(used, abs=0.051)
+
+
+def test_bearings_are_the_summary_bearings(replayed: tuple[Path, dict[str, Any]]) -> None:
+    rrd, doc = replayed
+    rows = _read(rrd)
+    keyframe_rows = [r for r in rows["/bearings/L4"] if r.get("movement") is not None]
+    logged = sorted(r["Scalars:scalars"][0] for r in keyframe_rows)
+    used = sorted(b for m in doc["movements"] for b in m["bearings_deg"]["L4"])
+    assert logged == pytest.approx(used, abs=1e-6)
+
+
+def test_fr_particles_and_map_values(replayed: tuple[Path, dict[str, Any]]) -> None:
+    rrd, doc = replayed
+    rows = _read(rrd)
+    fr = _column(rows["/fr/particles/L4"], "Points2D:positions")
+    assert len(fr) == len(MOVES) and all(len(p) == 50 for p in fr)
+    fl = _column(rows["/map/particles/L4"], "Points2D:positions")
+    assert all(len(p) == 100 for p in fl)
+    est = next(r for r in rows["/map/estimates"] if r.get("movement") == len(MOVES) - 1)
+    logged = dict(zip(est["Points2D:labels"], est["Points2D:positions"], strict=True))
+    for name, e in doc["landmarks"].items():
+        assert logged[name] == pytest.approx(e["mean"], abs=1e-5)  # float32 in Rerun
+    errors = [r["Scalars:scalars"][0] for r in rows["/error/mean"] if r.get("Scalars:scalars")]
+    assert errors[-1] == pytest.approx(doc["mean_error_m"], abs=1e-6)
+
+
+def test_fl_is_drawn_y_up(replayed: tuple[Path, dict[str, Any]]) -> None:
+    rows = _read(replayed[0])
+    for root in ("/map", "/fr"):
+        mat = _column(rows[root], "Transform3D:mat3x3")[0][0]
+        assert mat[4] == -1.0 and mat[0] == 1.0 and mat[8] == 1.0
+
+
+def test_fig1_range_marginal_is_flat_only_for_impartial(
+    replayed: tuple[Path, dict[str, Any]],
+) -> None:
+    rows = _read(replayed[0])
+
+    def spread(prior: str) -> float:
+        values = np.asarray(
+            _column(rows[f"/fig1/range/{prior}"], "BarChart:values")[0][0]["buffer"]
+        )
+        return float(np.std(values) / np.mean(values))
+
+    assert spread("impartial") < 0.05
+    assert spread("gaussian") > 0.3 and spread("mixture") > 0.3
+
+
+def test_blueprint_is_stored(replayed: tuple[Path, dict[str, Any]]) -> None:
+    reader = rr.chunk.RrdReader(replayed[0])
+    assert len(reader.blueprints()) == 1
+    assert math.isfinite(len(reader.recordings()))
