@@ -94,17 +94,20 @@ def frame_marginal_likelihood(
     rows = max(1, BLOCK_PAIRS // n_frames)  # blocks keep temporaries small (no page faults)
     for start in range(0, m, rows):
         x = x_all[start : start + rows]
-        bits = rng.integers(0, 1 << 32, (x.shape[0], n_frames), dtype=np.uint32)
-        u1 = (bits & 0xFFFF).astype(f32) * f32(2.0**-16)  # position in the stratum, [0, 1)
-        u2 = (bits >> 16).astype(f32) * f32(2.0**-16)
+        k = x.shape[0]
+        u1 = rng.random((k, n_frames), dtype=f32)  # position in the stratum, [0, 1)
+        u2 = rng.random((k, n_frames), dtype=f32)
         i = ((strata[0] + u1) * w1).astype(np.intp)
         j = ((strata[shift[start : start + rows]] + u2) * w2).astype(np.intp)
         # z = (1 - x) s1 + x s2: the point in FR for the pair (s1, s2)
-        z = (1 - x) * np.take(s1, i, mode="clip") + x * np.take(s2, j, mode="clip")
+        z = ((1 - x) * np.take(s1, i, mode="clip") + x * np.take(s2, j, mode="clip")).ravel()
         z1 = z * rot1
-        z2 = (z - 1) * rot2
-        w = noise.g_product(np.arctan2(z1.imag, z1.real), np.arctan2(z2.imag, z2.real))
-        out[start : start + rows] = w.mean(axis=1)
+        da1 = np.arctan2(z1.imag, z1.real)
+        # most pairs miss the cone at O1 (g = 0): finish only the others
+        hit = np.flatnonzero(np.abs(da1) <= noise.eps_rad)
+        z2 = (z[hit] - 1) * rot2
+        g = noise.g_product(da1[hit], np.arctan2(z2.imag, z2.real))
+        out[start : start + k] = np.bincount(hit // n_frames, g, minlength=k) / n_frames
     return out
 
 

@@ -8,14 +8,17 @@ from __future__ import annotations
 
 import math
 import tracemalloc
+from functools import partial
 from typing import Any
 
 import numpy as np
 import pytest
 
-from pipeline import BearingSlam
-from pipeline.frame_change import change_frame_exact, change_frame_sampled
-from pipeline.fusion import fuse
+from pipeline import BearingSlam, ConeIntersection, intersect_cones
+from pipeline.frame_change import change_frame_exact, change_frame_sampled, to_fl
+from pipeline.fusion import fuse, fuse_likelihood
+from pipeline.init_fr import sample_fr_posterior
+from pipeline.likelihood import frame_marginal_likelihood
 from pipeline.priors import ImpartialPrior
 from pipeline.synthetic import PAPER_REFERENCE, simulate_bearings
 
@@ -67,7 +70,45 @@ def test_impartial_pdf_100k(benchmark: Any) -> None:
 
 
 @pytest.mark.benchmark(group="fusion")
-def test_fusion_step(benchmark: Any) -> None:
+def test_likelihood_fusion_step(benchmark: Any) -> None:
+    """The default fusion of one landmark: 4800 proposals x 16 frame pairs of 1024 x 1024."""
+    rng = np.random.default_rng(3)
+    prior = ImpartialPrior(EPS)
+    truth_fr = {"L1": np.array([1.5, 2.0]), "L2": np.array([2.6, 1.4]), "L3": np.array([0.5, 1.2])}
+    bearings = {
+        k: (math.atan2(v[1], v[0]), math.atan2(v[1], v[0] - 1.0)) for k, v in truth_fr.items()
+    }
+    pools = []
+    for ref in ("L1", "L2"):
+        region = intersect_cones(*bearings[ref], EPS, prior.r_min, prior.r_max)
+        assert isinstance(region, ConeIntersection)
+        pool = sample_fr_posterior(region, prior, prior, 1024, rng)
+        assert isinstance(pool, np.ndarray)
+        pools.append(pool)
+    centre = to_fl(truth_fr["L3"], truth_fr["L1"], truth_fr["L2"])
+    prev = rng.multivariate_normal(centre, np.diag([0.01, 0.004]), 4800)
+    lik = partial(
+        frame_marginal_likelihood,
+        ref1_fr=pools[0],
+        ref2_fr=pools[1],
+        bearing_o1_rad=bearings["L3"][0],
+        bearing_o2_rad=bearings["L3"][1],
+        noise=prior,
+        rng=rng,
+    )
+    assert fuse_likelihood(prev, lik, 300, rng) is not None
+    benchmark(fuse_likelihood, prev, lik, 300, rng, prev_weights=np.ones(4800))
+
+
+@pytest.mark.benchmark(group="fusion")
+def test_yardstick_exp_77k(benchmark: Any) -> None:
+    x = np.random.default_rng(0).random(4800 * 16)  # the (proposal, frame) pairs of one step
+    benchmark(np.exp, x)
+
+
+@pytest.mark.benchmark(group="fusion")
+def test_product_fusion_step(benchmark: Any) -> None:
+    """The paper's product of two 300-particle KDEs (``fusion="product"``)."""
     rng = np.random.default_rng(3)
     a = rng.multivariate_normal([0.0, 0.0], np.diag([0.04, 0.01]), 300)
     b = rng.multivariate_normal([0.1, 0.0], np.diag([0.01, 0.04]), 300)
