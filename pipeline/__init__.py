@@ -4,8 +4,9 @@ from pipeline.cones import ConeIntersection, Degenerate, intersect_cones, vision
 from pipeline.crb import cramer_rao_bound, fisher_information, truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import change_frame
-from pipeline.fusion import fuse
-from pipeline.init_fr import initialize_fr
+from pipeline.fusion import fuse, fuse_likelihood
+from pipeline.init_fr import initialize_fr, sample_fr_posterior
+from pipeline.likelihood import frame_marginal_likelihood
 from pipeline.priors import (
     R_MAX_FR,
     R_MIN_FR,
@@ -45,12 +46,15 @@ __all__ = [
     "change_frame",
     "cramer_rao_bound",
     "fisher_information",
+    "frame_marginal_likelihood",
     "fuse",
+    "fuse_likelihood",
     "initialize_fr",
     "intersect_cones",
     "make_prior",
     "prior_density_grid",
     "range_marginal",
+    "sample_fr_posterior",
     "truncated_gaussian_std",
     "vision_cone_polygon",
 ]

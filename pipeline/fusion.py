@@ -2,24 +2,22 @@
 
 :func:`fuse_likelihood` (the default of :class:`pipeline.BearingSlam`):
 ``q_t = q_{t-1} L_t / ∫ q_{t-1} L_t`` with ``L_t`` this movement's bearing likelihood,
-marginalised over the movement's frame (:mod:`pipeline.likelihood`). Proposal: the shrinkage
-KDE of ``q_{t-1}`` (a regularised particle filter), so the importance weight is ``L_t`` alone;
-``n_proposal`` draws, one systematic resampling to ``n_l``.
+marginalised over the movement's frame (:mod:`pipeline.likelihood`). Proposal: the KDE of the
+(weighted) belief ``q_{t-1}`` (a regularised particle filter), so the importance weight is
+``L_t`` alone; the ``n_proposal`` weighted draws are the new belief (no reduction to ``n_l`` in
+between, which would lose diversity at every movement).
 
 :func:`fuse` (the paper's literal product) ``q_t = q_{t-1} p_t / ∫ q_{t-1} p_t``, with ``p_t``
 the movement's FL particle set. Each ``p_t`` carries the range prior again, so the product
-counts the prior once per movement (a bias towards the reference pair; see docs/method.md).
-
-Both particle sets are turned into densities by a Gaussian kernel density estimate with Liu &
-West (2001) shrinkage: kernel centres ``a x_i + (1 - a) mean``, kernel covariance ``h^2 Cov``,
-``a = sqrt(1 - h^2)``, so the KDE keeps the set's mean and covariance exactly (a plain KDE would
-inflate the covariance by ``1 + h^2`` at every fusion step). ``h`` defaults to Scott's factor
-``n^(-1/6)`` (2-D).
-
+counts the prior once per movement (a bias towards the observation points; docs/method.md).
 Proposal: the defensive mixture ``(q^ + p^) / 2`` (half the draws from each KDE), which covers
-the product's support wherever either belief has mass. Importance weights
-``q^(x) p^(x) / ((q^(x) + p^(x)) / 2)`` are computed in the log domain, then one systematic
-resampling to ``n_l`` particles.
+the product's support wherever either belief has mass; weights
+``q^(x) p^(x) / ((q^(x) + p^(x)) / 2)`` in the log domain, one systematic resampling to ``n_l``.
+
+Densities: a Gaussian kernel density estimate with Liu & West (2001) shrinkage: kernel centres
+``a x_i + (1 - a) mean``, kernel covariance ``h^2 Cov``, ``a = sqrt(1 - h^2)``, so the KDE keeps
+the set's mean and covariance exactly (a plain KDE would inflate the covariance by ``1 + h^2`` at
+every fusion step). ``h`` defaults to Scott's factor ``n_eff^(-1/6)`` (2-D).
 """
 
 from __future__ import annotations
@@ -31,52 +29,66 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.estimate import LandmarkEstimate
 from pipeline.resample import systematic_resample
 
 
 @dataclass(frozen=True)
 class Kde:
-    """Shrinkage Gaussian KDE of a 2-D particle set (frame of the particles).
+    """Shrinkage Gaussian KDE of a 2-D particle set, optionally weighted (frame of the particles).
 
     Attributes
     ----------
+    centres : ndarray (n, 2)
+        Kernel centres in the original frame.
     centres_w : ndarray (n, 2)
         Kernel centres in whitened coordinates (kernel covariance = identity).
+    sq_w : ndarray (n,)
+        Squared norms of ``centres_w``.
+    weights : ndarray (n,)
+        Kernel weights (sum 1).
     whiten : ndarray (2, 2)
         ``W`` with ``W x`` whitened (``W^T W = (h^2 Cov)^-1``).
     chol : ndarray (2, 2)
         Lower Cholesky factor of the kernel covariance (for sampling).
-    centres : ndarray (n, 2)
-        Kernel centres in the original frame.
     log_norm : float
-        ``-log(n) - log(2 pi) - log det(chol)``.
+        ``-log(2 pi) - log det(chol)``.
     """
 
     centres: NDArray[np.float64]
     centres_w: NDArray[np.float64]
     sq_w: NDArray[np.float64]
+    weights: NDArray[np.float64]
     whiten: NDArray[np.float64]
     chol: NDArray[np.float64]
     log_norm: float
 
     @classmethod
-    def fit(cls, particles: NDArray[np.float64], h: float | None = None) -> Kde:
-        """KDE of ``particles`` (n, 2) with bandwidth factor ``h`` (default Scott)."""
+    def fit(
+        cls,
+        particles: NDArray[np.float64],
+        h: float | None = None,
+        *,
+        weights: NDArray[np.float64] | None = None,
+    ) -> Kde:
+        """KDE of ``particles`` (n, 2), equally weighted or with ``weights`` (n,).
+
+        ``h`` defaults to Scott's factor of the effective sample size ``(sum w)^2 / sum w^2``;
+        mean and covariance are those of :meth:`LandmarkEstimate.from_particles`.
+        """
         x = np.asarray(particles, dtype=np.float64)
         n = x.shape[0]
-        hh = n ** (-1.0 / 6.0) if h is None else h
-        mean = x.mean(axis=0)
-        d = x - mean
-        cov = (d.T @ d) / max(n - 1, 1)
-        ridge = 1e-12 * max(float(np.trace(cov)), 1e-12)
-        cov = cov + ridge * np.eye(2)
-        chol = np.linalg.cholesky(hh * hh * cov)
+        w = np.full(n, 1.0 / n) if weights is None else weights / weights.sum()
+        hh = float(w @ w) ** (1.0 / 6.0) if h is None else h
+        est = LandmarkEstimate.from_particles(x, weights=w)
+        ridge = 1e-12 * max(float(np.trace(est.cov_fl)), 1e-12)
+        chol = np.linalg.cholesky(hh * hh * (est.cov_fl + ridge * np.eye(2)))
         whiten = np.linalg.inv(chol)
         a = math.sqrt(max(0.0, 1.0 - hh * hh))
-        centres = a * x + (1.0 - a) * mean
+        centres = a * x + (1.0 - a) * est.mean_fl
         cw = centres @ whiten.T
-        log_norm = -math.log(n) - math.log(2.0 * math.pi) - math.log(chol[0, 0] * chol[1, 1])
-        return cls(centres, cw, (cw * cw).sum(axis=1), whiten, chol, log_norm)
+        log_norm = -math.log(2.0 * math.pi) - math.log(chol[0, 0] * chol[1, 1])
+        return cls(centres, cw, (cw * cw).sum(axis=1), w, whiten, chol, log_norm)
 
     def logpdf(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         """Log density at points (m, 2) -> (m,)."""
@@ -84,13 +96,13 @@ class Kde:
         d2 = (qw * qw).sum(axis=1)[:, None] + self.sq_w[None, :] - 2.0 * (qw @ self.centres_w.T)
         # log-sum-exp over kernels, anchored at the nearest centre
         m = d2.min(axis=1)
-        s = np.exp(-0.5 * (d2 - m[:, None])).sum(axis=1)
+        s = np.exp(-0.5 * (d2 - m[:, None])) @ self.weights
         out: NDArray[np.float64] = np.log(s) - 0.5 * m + self.log_norm
         return out
 
     def sample(self, n: int, rng: np.random.Generator) -> NDArray[np.float64]:
-        """``n`` points (n, 2) from the KDE."""
-        idx = rng.integers(0, self.centres.shape[0], n)
+        """``n`` points (n, 2) from the KDE (kernels by systematic resampling of the weights)."""
+        idx = systematic_resample(self.weights, n, rng)
         out: NDArray[np.float64] = self.centres[idx] + rng.standard_normal((n, 2)) @ self.chol.T
         return out
 
@@ -135,32 +147,6 @@ def fuse(
 PROPOSALS_PER_PARTICLE = 16
 
 
-def jittered_draws(
-    particles: NDArray[np.float64],
-    weights: NDArray[np.float64],
-    m: int,
-    rng: np.random.Generator,
-    h: float | None = None,
-) -> NDArray[np.float64]:
-    """``m`` draws (m, 2) from the shrinkage KDE of a weighted set (see :class:`Kde`).
-
-    Kernel centres ``a x_i + (1 - a) mean`` picked by systematic resampling of ``weights``,
-    kernel covariance ``h^2 Cov`` (weighted mean and covariance), ``h`` by default Scott's
-    factor of the effective sample size ``(sum w)^2 / sum w^2``.
-    """
-    w = weights / weights.sum()
-    mean = w @ particles
-    d = particles - mean
-    cov = (d * w[:, None]).T @ d
-    cov = cov + 1e-12 * max(float(np.trace(cov)), 1e-12) * np.eye(2)
-    hh = float(w @ w) ** (1.0 / 6.0) if h is None else h
-    a = math.sqrt(max(0.0, 1.0 - hh * hh))
-    centres = a * particles[systematic_resample(w, m, rng)] + (1.0 - a) * mean
-    chol = np.linalg.cholesky(hh * hh * cov)
-    out: NDArray[np.float64] = centres + rng.standard_normal((m, 2)) @ chol.T
-    return out
-
-
 def fuse_likelihood(
     prev_fl: NDArray[np.float64],
     likelihood: Callable[[NDArray[np.float64]], NDArray[np.float64]],
@@ -194,8 +180,7 @@ def fuse_likelihood(
         Draws ``m`` from the KDE of ``prev_fl``.
     """
     m = PROPOSALS_PER_PARTICLE * n_l if n_proposal is None else n_proposal
-    w_prev = np.ones(prev_fl.shape[0]) if prev_weights is None else prev_weights
-    x = jittered_draws(prev_fl, w_prev, m, rng, h)
+    x = Kde.fit(prev_fl, h, weights=prev_weights).sample(m, rng)
     w = likelihood(x)
     if not float(w.sum()) > 0.0:
         return None

@@ -14,7 +14,7 @@ from pipeline import BearingSlam, MovementObservation
 from pipeline.cones import ConeIntersection, intersect_cones
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import to_fl
-from pipeline.fusion import fuse_likelihood, jittered_draws
+from pipeline.fusion import Kde, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
 from pipeline.likelihood import frame_marginal_likelihood
 from pipeline.priors import ImpartialPrior, make_prior
@@ -95,12 +95,12 @@ def test_likelihood_is_unbiased_over_frame_pairs() -> None:
     assert abs(draws.mean() - exact) < 4 * draws.std() / math.sqrt(draws.size)
 
 
-def test_jittered_draws_keep_weighted_mean_and_covariance() -> None:
+def test_weighted_kde_keeps_weighted_mean_and_covariance() -> None:
     rng = np.random.default_rng(4)
     x = rng.normal([1.0, -2.0], [0.5, 0.2], (2000, 2))
     w = np.exp(-0.5 * ((x[:, 0] - 1.3) / 0.3) ** 2)
     est = LandmarkEstimate.from_particles(x, weights=w)
-    draws = jittered_draws(x, w, 200_000, rng)
+    draws = Kde.fit(x, weights=w).sample(200_000, rng)
     np.testing.assert_allclose(draws.mean(axis=0), est.mean_fl, atol=0.01)
     np.testing.assert_allclose(np.cov(draws.T), est.cov_fl, atol=0.01)
 
