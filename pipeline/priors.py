@@ -27,7 +27,6 @@ from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import ndtr, ndtri
 
 from data_schemas.errors import EstimationError
 
@@ -195,10 +194,18 @@ class ImpartialPrior:
         """``n`` angular offsets drawn from ``g`` (rad)."""
         if self.angular == "uniform":
             return rng.uniform(-self.eps_rad, self.eps_rad, n)
+        # Exact truncated normal by rejection (no scipy.special import: ~0.14 s); acceptance is
+        # P(|z| <= 1 / sigma_frac), 95% at the default sigma = eps / 2.
         k = 1.0 / self.sigma_frac
-        lo = float(ndtr(-k))
-        u = rng.uniform(lo, 1.0 - lo, n)
-        return np.asarray(self.sigma_frac * self.eps_rad * ndtri(u), dtype=np.float64)
+        out = np.empty(n)
+        filled = 0
+        while filled < n:
+            z = rng.standard_normal(int((n - filled) * 1.1) + 8)
+            z = z[np.abs(z) <= k][: n - filled]
+            out[filled : filled + z.size] = z
+            filled += z.size
+        out *= self.sigma_frac * self.eps_rad
+        return out
 
     def sample(
         self, n: int, origin: NDArray[np.float64], bearing_rad: float, rng: np.random.Generator

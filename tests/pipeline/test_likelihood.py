@@ -52,11 +52,15 @@ def test_bearing_error_sampler_matches_the_paper_sampler(
     region = _region(np.array(landmark))
     prior = make_prior(kind, EPS)  # type: ignore[arg-type]
     paper = initialize_fr(region, prior, 40_000, rng, draws_per_particle=5)
-    ours = sample_fr_posterior(region, prior, NOISE, 40_000, rng)
+    # The posterior sampler is importance-weighted (bearing-error proposal): with the single
+    # Gaussian prior its effective sample size is a few thousand, and over 40 seeds the mean of
+    # 40k draws strays up to 0.09 sd from a 1M-draw reference. 100k draws and a 0.06 sd bound
+    # keep the check stable; dropping the r1 r2 Jacobian moves the mean 0.08-0.67 sd.
+    ours = sample_fr_posterior(region, prior, NOISE, 100_000, rng)
     assert isinstance(paper, np.ndarray) and isinstance(ours, np.ndarray)
     assert np.all(region.contains(ours))
     sd = np.sqrt(np.diag(np.cov(paper.T)))
-    np.testing.assert_allclose(ours.mean(axis=0), paper.mean(axis=0), atol=0.03 * sd.max())
+    np.testing.assert_allclose(ours.mean(axis=0), paper.mean(axis=0), atol=0.06 * sd.max())
     np.testing.assert_allclose(np.cov(ours.T), np.cov(paper.T), rtol=0.08, atol=1e-3 * sd.max())
 
 
