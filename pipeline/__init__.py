@@ -6,7 +6,7 @@ from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import change_frame
 from pipeline.fusion import fuse, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
-from pipeline.likelihood import frame_marginal_likelihood
+from pipeline.likelihood import FrameLikelihood
 from pipeline.priors import (
     R_MAX_FR,
     R_MIN_FR,
@@ -36,6 +36,7 @@ __all__ = [
     "BearingSlam",
     "ConeIntersection",
     "Degenerate",
+    "FrameLikelihood",
     "GaussianPrior",
     "ImpartialPrior",
     "LandmarkEstimate",
@@ -46,7 +47,6 @@ __all__ = [
     "change_frame",
     "cramer_rao_bound",
     "fisher_information",
-    "frame_marginal_likelihood",
     "fuse",
     "fuse_likelihood",
     "initialize_fr",

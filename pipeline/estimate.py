@@ -41,9 +41,10 @@ class LandmarkEstimate:
         x = np.asarray(particles_fl, dtype=np.float64)
         n = x.shape[0]
         w = np.full(n, 1.0 / n) if weights is None else weights / weights.sum()
-        mean = w @ x
-        d = x - mean
-        return cls(mean, ((d * w[:, None]).T @ d) / max(1.0 - float(w @ w), 1e-12))
+        d = np.array(x.T, order="C")  # (2, n) copy: long contiguous rows (numpy is slow on (n, 2))
+        mean = d @ w
+        d -= mean[:, None]
+        return cls(mean, ((d * w) @ d.T) / max(1.0 - float(w @ w), 1e-12))
 
     def mahalanobis2(self, point_fl: NDArray[np.float64]) -> float:
         """Squared Mahalanobis distance of a point (2,) from the mean."""

@@ -36,7 +36,7 @@ from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import FrameChange, change_frame
 from pipeline.fusion import fuse, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
-from pipeline.likelihood import N_FRAMES, frame_marginal_likelihood
+from pipeline.likelihood import N_FRAMES, FrameLikelihood
 from pipeline.priors import R_MAX_FR, R_MIN_FR, ImpartialPrior, PriorName, make_prior
 from pipeline.resample import systematic_resample
 
@@ -235,10 +235,9 @@ class BearingSlam:
             regions[name] = region
         return out
 
-    def _frame_sets(
-        self, regions: dict[str, ConeIntersection]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-        """Fine FR sets (n_frame_pool, 2) of the reference pair: the movement's frame."""
+    def _frame(self, regions: dict[str, ConeIntersection]) -> FrameLikelihood | None:
+        """The movement's frame for the likelihood: fine FR sets (n_frame_pool, 2) of the
+        reference pair."""
         out = []
         for ref in self.reference:
             s = sample_fr_posterior(
@@ -247,25 +246,16 @@ class BearingSlam:
             if isinstance(s, Degenerate):
                 return None
             out.append(s)
-        return out[0], out[1]
+        return FrameLikelihood(out[0], out[1], self.noise, n_frames=self.n_frames)
 
     def _fuse_likelihood(
         self,
         prev: tuple[NDArray[np.float64], NDArray[np.float64]],
-        frames: tuple[NDArray[np.float64], NDArray[np.float64]],
+        frame: FrameLikelihood,
         b1: float,
         b2: float,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-        lik = partial(
-            frame_marginal_likelihood,
-            ref1_fr=frames[0],
-            ref2_fr=frames[1],
-            bearing_o1_rad=b1,
-            bearing_o2_rad=b2,
-            noise=self.noise,
-            rng=self.rng,
-            n_frames=self.n_frames,
-        )
+        lik = partial(frame, bearing_o1_rad=b1, bearing_o2_rad=b2, rng=self.rng)
         return fuse_likelihood(
             prev[0], lik, self.n_l, self.rng, prev_weights=prev[1], n_proposal=self.n_proposal
         )
@@ -289,13 +279,13 @@ class BearingSlam:
         l1, l2 = self.reference
         others = {k: v for k, v in sets_fr.items() if k not in self.reference}
         fl = change_frame(sets_fr[l1], sets_fr[l2], others, self.n_l, self.rng, self.frame_change)
-        frames = None if self.fusion == "product" else self._frame_sets(regions)
+        frame = None if self.fusion == "product" else self._frame(regions)
         for name in self.landmarks:
             if name in self.reference:
                 continue
             prev = self._weighted.get(name)
             p_t = fl.landmarks_fl.get(name)
-            if prev is None or frames is None:
+            if prev is None or frame is None:
                 if p_t is not None:
                     new = p_t if prev is None else fuse(prev[0], p_t, self.n_l, self.rng)
                     self._set_belief(name, new, np.ones(new.shape[0]))
@@ -305,7 +295,7 @@ class BearingSlam:
             b2 = obs.bearings_o2_rad.get(name)
             if b1 is None or b2 is None or not (math.isfinite(b1) and math.isfinite(b2)):
                 continue
-            q = self._fuse_likelihood(prev, frames, float(b1), float(b2))
+            q = self._fuse_likelihood(prev, frame, float(b1), float(b2))
             if q is None:
                 res.skipped_landmarks[name] = "bearings have zero likelihood under the belief"
                 continue

@@ -18,7 +18,7 @@ from pipeline import BearingSlam, ConeIntersection, intersect_cones
 from pipeline.frame_change import change_frame_exact, change_frame_sampled, to_fl
 from pipeline.fusion import fuse, fuse_likelihood
 from pipeline.init_fr import sample_fr_posterior
-from pipeline.likelihood import frame_marginal_likelihood
+from pipeline.likelihood import FrameLikelihood
 from pipeline.priors import ImpartialPrior
 from pipeline.synthetic import PAPER_REFERENCE, simulate_bearings
 
@@ -69,9 +69,8 @@ def test_impartial_pdf_100k(benchmark: Any) -> None:
     benchmark(prior.density, pts, np.zeros(2), 0.2)
 
 
-@pytest.mark.benchmark(group="fusion")
-def test_likelihood_fusion_step(benchmark: Any) -> None:
-    """The default fusion of one landmark: 4800 proposals x 16 frame pairs of 1024 x 1024."""
+def _likelihood_case() -> tuple[np.ndarray, np.ndarray, tuple[float, float], np.ndarray]:
+    """Reference pools (1024 FR particles each), L3's bearings and a 4800-point belief in FL."""
     rng = np.random.default_rng(3)
     prior = ImpartialPrior(EPS)
     truth_fr = {"L1": np.array([1.5, 2.0]), "L2": np.array([2.6, 1.4]), "L3": np.array([0.5, 1.2])}
@@ -87,17 +86,25 @@ def test_likelihood_fusion_step(benchmark: Any) -> None:
         pools.append(pool)
     centre = to_fl(truth_fr["L3"], truth_fr["L1"], truth_fr["L2"])
     prev = rng.multivariate_normal(centre, np.diag([0.01, 0.004]), 4800)
-    lik = partial(
-        frame_marginal_likelihood,
-        ref1_fr=pools[0],
-        ref2_fr=pools[1],
-        bearing_o1_rad=bearings["L3"][0],
-        bearing_o2_rad=bearings["L3"][1],
-        noise=prior,
-        rng=rng,
-    )
+    return pools[0], pools[1], bearings["L3"], prev
+
+
+@pytest.mark.benchmark(group="fusion")
+def test_likelihood_fusion_step(benchmark: Any) -> None:
+    """The default fusion of one landmark: 4800 proposals x 16 frame pairs of 1024 x 1024."""
+    pool1, pool2, (b1, b2), prev = _likelihood_case()
+    rng = np.random.default_rng(4)
+    frame = FrameLikelihood(pool1, pool2, ImpartialPrior(EPS))  # once per movement
+    lik = partial(frame, bearing_o1_rad=b1, bearing_o2_rad=b2, rng=rng)
     assert fuse_likelihood(prev, lik, 300, rng) is not None
     benchmark(fuse_likelihood, prev, lik, 300, rng, prev_weights=np.ones(4800))
+
+
+@pytest.mark.benchmark(group="fusion")
+def test_likelihood_frame_per_movement(benchmark: Any) -> None:
+    """What a movement pays once for all its landmarks: sorting the two 1024-particle pools."""
+    pool1, pool2, _, _ = _likelihood_case()
+    benchmark(FrameLikelihood, pool1, pool2, ImpartialPrior(EPS))
 
 
 @pytest.mark.benchmark(group="fusion")

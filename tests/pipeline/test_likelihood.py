@@ -16,7 +16,7 @@ from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import to_fl
 from pipeline.fusion import Kde, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
-from pipeline.likelihood import frame_marginal_likelihood
+from pipeline.likelihood import FrameLikelihood
 from pipeline.priors import ImpartialPrior, make_prior
 from pipeline.synthetic import PAPER_REFERENCE, simulate_bearings
 
@@ -70,7 +70,7 @@ def test_likelihood_with_a_known_frame_is_the_bearing_likelihood() -> None:
     landmark_fr = np.array([0.6, 1.4])
     b1, b2 = _bearings_fr(landmark_fr)
     pts_fl = rng.normal(to_fl(landmark_fr, s1[0], s2[0]), 0.05, (500, 2))
-    got = frame_marginal_likelihood(pts_fl, s1, s2, b1, b2, NOISE, rng, n_frames=4)
+    got = FrameLikelihood(s1, s2, NOISE, n_frames=4)(pts_fl, b1, b2, rng)
     # the FL points back in FR: z = s1 + x (s2 - s1)
     c1, c2 = complex(*s1[0]), complex(*s2[0])
     z = c1 + (pts_fl[:, 0] + 1j * pts_fl[:, 1]) * (c2 - c1)
@@ -89,12 +89,12 @@ def test_likelihood_is_unbiased_over_frame_pairs() -> None:
     x = to_fl(truth, s1.mean(axis=0), s2.mean(axis=0))[None, :]
     exact = np.mean(
         [
-            frame_marginal_likelihood(x, s1[i : i + 1], s2[j : j + 1], b1, b2, NOISE, rng)[0]
+            FrameLikelihood(s1[i : i + 1], s2[j : j + 1], NOISE)(x, b1, b2, rng)[0]
             for i in range(8)
             for j in range(8)
         ]
     )
-    draws = frame_marginal_likelihood(np.repeat(x, 20_000, axis=0), s1, s2, b1, b2, NOISE, rng)
+    draws = FrameLikelihood(s1, s2, NOISE)(np.repeat(x, 20_000, axis=0), b1, b2, rng)
     assert exact > 0.0
     assert abs(draws.mean() - exact) < 4 * draws.std() / math.sqrt(draws.size)
 
