@@ -48,6 +48,17 @@ def test_shrinkage_kde_keeps_mean_and_covariance() -> None:
     assert math.isclose(dens.sum() * (g[1] - g[0]) ** 2, 1.0, rel_tol=1e-3)
 
 
+def test_kde_and_estimate_leave_the_particles_alone() -> None:
+    # (2, n) work copies: a Fortran-ordered (n, 2) set is such a view already; it must be copied
+    rng = np.random.default_rng(3)
+    x = np.asfortranarray(rng.normal([1.0, -2.0], 0.1, (50, 2)))
+    w = rng.random(50)
+    before = x.copy()
+    LandmarkEstimate.from_particles(x, weights=w)
+    Kde.fit(x, weights=w).sample(10, rng)
+    np.testing.assert_array_equal(x, before)
+
+
 def test_credible_ellipse_has_its_probability() -> None:
     rng = np.random.default_rng(2)
     cov = np.array([[0.5, 0.2], [0.2, 0.3]])

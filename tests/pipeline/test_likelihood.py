@@ -64,6 +64,20 @@ def test_bearing_error_sampler_matches_the_paper_sampler(
     np.testing.assert_allclose(np.cov(ours.T), np.cov(paper.T), rtol=0.08, atol=1e-3 * sd.max())
 
 
+def _pair_likelihood(
+    pts_fl: np.ndarray, s1: np.ndarray, s2: np.ndarray, b1: float, b2: float
+) -> np.ndarray:
+    """``g g`` of FL points (m, 2) for each frame pair: (m, len(s1), len(s2)), float64."""
+    c1 = (s1[:, 0] + 1j * s1[:, 1])[None, :, None]
+    c2 = (s2[:, 0] + 1j * s2[:, 1])[None, None, :]
+    x = (pts_fl[:, 0] + 1j * pts_fl[:, 1])[:, None, None]
+    z = c1 + x * (c2 - c1)  # the FL points back in FR
+    out: np.ndarray = NOISE.g(np.angle(z * np.exp(-1j * b1))) * NOISE.g(
+        np.angle((z - 1) * np.exp(-1j * b2))
+    )
+    return out
+
+
 def test_likelihood_with_a_known_frame_is_the_bearing_likelihood() -> None:
     rng = np.random.default_rng(2)
     s1, s2 = np.array([[1.5, 2.0]]), np.array([[2.5, 1.2]])
@@ -71,31 +85,28 @@ def test_likelihood_with_a_known_frame_is_the_bearing_likelihood() -> None:
     b1, b2 = _bearings_fr(landmark_fr)
     pts_fl = rng.normal(to_fl(landmark_fr, s1[0], s2[0]), 0.05, (500, 2))
     got = FrameLikelihood(s1, s2, NOISE, n_frames=4)(pts_fl, b1, b2, rng)
-    # the FL points back in FR: z = s1 + x (s2 - s1)
-    c1, c2 = complex(*s1[0]), complex(*s2[0])
-    z = c1 + (pts_fl[:, 0] + 1j * pts_fl[:, 1]) * (c2 - c1)
-    want = NOISE.g(np.angle(z * np.exp(-1j * b1))) * NOISE.g(np.angle((z - 1) * np.exp(-1j * b2)))
+    want = _pair_likelihood(pts_fl, s1, s2, b1, b2)[:, 0, 0]
     np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6 * want.max())
     assert np.any(want > 0) and np.any(want == 0)
 
 
-def test_likelihood_is_unbiased_over_frame_pairs() -> None:
+# pool size, frames per point: strata of 1/2, 3 members (float32 positions) and 4 members
+# (integer positions from random bytes); 4 members but 12 frames (12 does not divide 256: float)
+@pytest.mark.parametrize(("n_pool", "n_frames"), [(8, 16), (48, 16), (64, 16), (48, 12)])
+def test_likelihood_is_unbiased_over_frame_pairs(n_pool: int, n_frames: int) -> None:
     rng = np.random.default_rng(3)
     truth = np.array([0.6, 1.4])
-    s1 = rng.normal([1.5, 2.0], 0.03, (8, 2))
-    s2 = rng.normal([2.5, 1.2], 0.03, (8, 2))
+    s1 = rng.normal([1.5, 2.0], 0.03, (n_pool, 2))
+    s2 = rng.normal([2.5, 1.2], 0.03, (n_pool, 2))
     # a point of FL near the landmark for the mean frame, bearings of the truth in FR
     b1, b2 = _bearings_fr(truth)
     x = to_fl(truth, s1.mean(axis=0), s2.mean(axis=0))[None, :]
-    exact = np.mean(
-        [
-            FrameLikelihood(s1[i : i + 1], s2[j : j + 1], NOISE)(x, b1, b2, rng)[0]
-            for i in range(8)
-            for j in range(8)
-        ]
-    )
-    draws = FrameLikelihood(s1, s2, NOISE)(np.repeat(x, 20_000, axis=0), b1, b2, rng)
-    assert exact > 0.0
+    pairs = _pair_likelihood(x, s1, s2, b1, b2)
+    exact = pairs.mean()
+    frame = FrameLikelihood(s1, s2, NOISE, n_frames=n_frames)
+    draws = frame(np.repeat(x, 20_000, axis=0), b1, b2, rng)
+    # the pairs matter: the likelihood varies from pair to pair
+    assert exact > 0.0 and pairs.std() > 0.5 * exact
     assert abs(draws.mean() - exact) < 4 * draws.std() / math.sqrt(draws.size)
 
 
