@@ -97,11 +97,9 @@ class FrameLikelihood:
         # one random byte) and the doubled S2 fits uint16; float32 otherwise
         self._int_index = None not in log2w and 256 % n_frames == 0 and 2 * s2.size <= 2**16
         if self._int_index:  # member = start + (r >> (8 - e)), r a random byte
-            self._bits: type[np.unsignedinteger[Any]] = np.uint8
             self._drop = np.array([8 - (e or 0) for e in log2w], np.uint8)[:, None, None]
             self._start = (k * width).astype(np.uint16)
         else:  # member = floor(start + r width / 2^16), r 16 random bits
-            self._bits = np.uint16
             self._scale = (width / 2**16).astype(np.float32)
             self._start = (k * width).astype(np.float32)
         self._tan_eps = np.float32(math.tan(noise.eps_rad))
@@ -166,6 +164,7 @@ class FrameLikelihood:
         idx = self._buffer("idx", (nf, m), np.intp)
         s1 = self._buffer("s1", (nf, m), np.complex64)
         z = self._buffer("z", (nf, m), np.complex64)
+        # members are in range: "wrap" is only the fastest mode of take ("clip" with out is slow)
         np.copyto(idx, pos[0], casting="unsafe")  # floor (pos >= 0)
         # z = s1 + x (s2 - s1): the point in FR for the pair (s1, s2), turned by -b1 so that
         # the measured ray at O1 is +x

@@ -236,8 +236,7 @@ class BearingSlam:
         return out
 
     def _frame(self, regions: dict[str, ConeIntersection]) -> FrameLikelihood | None:
-        """The movement's frame for the likelihood: fine FR sets (n_frame_pool, 2) of the
-        reference pair."""
+        """The movement's frame for the likelihood (reference pair, n_frame_pool FR particles)."""
         out = []
         for ref in self.reference:
             s = sample_fr_posterior(
