@@ -191,15 +191,16 @@ class LogReader:
     def _leading_metadata(self) -> dict[str, dict[str, str]]:
         """Metadata records before the first chunk (the recorder writes the session first)."""
         found: dict[str, dict[str, str]] = {}
-        for record in self._records():
-            if isinstance(record, Chunk):
-                break
+        for record in self._records(stop_at_chunk=True):
             if isinstance(record, Metadata):
                 found[record.name] = dict(record.metadata)
         return found
 
-    def _records(self) -> Iterator[Metadata | Chunk]:
-        """Complete top-level metadata and chunk records; stop at the footer or the damage."""
+    def _records(self, *, stop_at_chunk: bool = False) -> Iterator[Metadata | Chunk]:
+        """Complete top-level metadata and chunk records; stop at the footer or the damage.
+
+        With ``stop_at_chunk``, stop before the first chunk instead (not read, not checked).
+        """
         end = self._start + self._size
         pos = self._start + len(MAGIC)
         self.trailing_bytes = 0
@@ -214,7 +215,7 @@ class LogReader:
             if length > end - body_start:
                 self.trailing_bytes = end - pos
                 return
-            if opcode == Opcode.FOOTER:
+            if opcode == Opcode.FOOTER or (stop_at_chunk and opcode == Opcode.CHUNK):
                 return
             if opcode in (Opcode.METADATA, Opcode.CHUNK):
                 body = self._stream.read(length)

@@ -44,11 +44,11 @@ MAGIC = bytes([137, 77, 67, 65, 80, 48, 13, 10])
 #: Every record starts with its opcode and the length of its body.
 RECORD_HEADER = struct.Struct("<BQ")
 #: Message record up to its data: opcode, length, channel id, sequence, log and publish time.
-_MESSAGE_HEADER = struct.Struct("<BQHIQQ")
-_MESSAGE_FIELDS = _MESSAGE_HEADER.size - RECORD_HEADER.size
+MESSAGE_HEADER = struct.Struct("<BQHIQQ")
+MESSAGE_FIELDS = MESSAGE_HEADER.size - RECORD_HEADER.size
 #: Chunk record up to its records: start/end time, uncompressed size and CRC, compression
-#: (empty string: stored), records length.
-_CHUNK_HEADER = struct.Struct("<BQQQQIIQ")
+#: (empty string: stored), records length; the records of a stored chunk follow it.
+STORED_CHUNK_HEADER = struct.Struct("<BQQQQIIQ")
 _FOOTER_PREFIX = struct.Struct("<BQQQ")
 
 Bytes = bytes | bytearray | memoryview
@@ -166,8 +166,8 @@ class McapChunkWriter:
 
         The parts are kept by reference until the chunk is closed: do not modify them.
         """
-        length = _MESSAGE_FIELDS + sum(len(part) for part in data)
-        header = _MESSAGE_HEADER.pack(
+        length = MESSAGE_FIELDS + sum(len(part) for part in data)
+        header = MESSAGE_HEADER.pack(
             Opcode.MESSAGE, length, channel_id, sequence, log_time_ns, publish_time_ns
         )
         chunk = self._chunk
@@ -197,9 +197,9 @@ class McapChunkWriter:
             self._start_ns = min(self._start_ns, chunk.start_ns)
             self._end_ns = max(self._end_ns, chunk.end_ns)
         chunk_offset = self._stream.tell()
-        head = _CHUNK_HEADER.pack(
+        head = STORED_CHUNK_HEADER.pack(
             Opcode.CHUNK,
-            _CHUNK_HEADER.size - RECORD_HEADER.size + chunk.size,
+            STORED_CHUNK_HEADER.size - RECORD_HEADER.size + chunk.size,
             chunk.start_ns,
             chunk.end_ns,
             chunk.size,

@@ -10,17 +10,19 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Container, Iterator
 from pathlib import Path
 from types import TracebackType
 from typing import IO
 
 from mcap.exceptions import McapError
 from mcap.reader import McapReader, make_reader
+from mcap.records import Message
 
 from data_schemas.errors import LogError, MissingMetadataError, UnknownSchemaError
 from data_schemas.registry import IMAGE_SCHEMAS, SESSION_METADATA_NAME, TOPICS, schema_dict
 from data_schemas.session import Session, session_from_metadata
+from recorder.logindex import LogIndex
 from recorder.logread import LogMessage, LogReader
 
 
@@ -74,12 +76,16 @@ class ProcessableLog:
         except McapError as exc:
             self._file.close()
             raise LogError(f"{self.name}: cannot read the log's index ({exc})") from None
-        self._schemas = {} if summary is None else summary.schemas
-        self._channels = {} if summary is None else summary.channels
+        self._index = LogIndex.of(self._file, summary)
+        schemas = {} if summary is None else summary.schemas
+        #: channel id -> (topic, schema name)
+        self._channel_names: dict[int, tuple[str, str]] = {}
         self.topics: dict[str, str] = {}
-        for channel in self._channels.values():
-            schema = self._schemas.get(channel.schema_id)
-            self.topics[channel.topic] = "" if schema is None else schema.name
+        for channel_id, channel in ({} if summary is None else summary.channels).items():
+            schema = schemas.get(channel.schema_id)
+            schema_name = "" if schema is None else schema.name
+            self.topics[channel.topic] = schema_name
+            self._channel_names[channel_id] = (channel.topic, schema_name)
         self._check_schemas()
 
     def _check_schemas(self) -> None:
@@ -109,16 +115,21 @@ class ProcessableLog:
         *,
         start_ns: int | None = None,
         end_ns: int | None = None,
+        publish_times_ns: Container[int] | None = None,
     ) -> Iterator[LogMessage]:
-        """Messages of ``topics`` with ``start_ns <= log_time < end_ns``, in log-time order."""
+        """Messages of ``topics`` with ``start_ns <= log_time < end_ns``, in log-time order.
+
+        ``publish_times_ns``, if given, keeps only messages whose publish time is in it (in a
+        log the recorder wrote, the others' data is not even read).
+        """
         wanted = None if topics is None else list(topics)
         try:
-            for schema, channel, message in self._reader.iter_messages(
-                topics=wanted, start_time=start_ns, end_time=end_ns, log_time_order=True
+            for topic_name, schema_name, message in self._found(
+                wanted, start_ns, end_ns, publish_times_ns
             ):
                 yield LogMessage(
-                    channel.topic,
-                    "" if schema is None else schema.name,
+                    topic_name,
+                    schema_name,
                     message.log_time,
                     message.publish_time,
                     message.sequence,
@@ -128,6 +139,28 @@ class ProcessableLog:
             raise LogError(
                 f"{self.name}: the log is damaged ({exc}); try `bslam recover`"
             ) from None
+
+    def _found(
+        self,
+        topics: list[str] | None,
+        start_ns: int | None,
+        end_ns: int | None,
+        publish_times_ns: Container[int] | None,
+    ) -> Iterator[tuple[str, str, Message]]:
+        """(topic, schema name, message): read in place if the log allows, else by mcap."""
+        if self._index is not None:
+            names = self._channel_names
+            ids = [i for i, (t, _) in names.items() if topics is None or t in topics]
+            for message in self._index.messages(
+                ids, start_ns=start_ns, end_ns=end_ns, publish_times_ns=publish_times_ns
+            ):
+                yield (*names[message.channel_id], message)
+            return
+        for schema, channel, message in self._reader.iter_messages(
+            topics=topics, start_time=start_ns, end_time=end_ns, log_time_order=True
+        ):
+            if publish_times_ns is None or message.publish_time in publish_times_ns:
+                yield channel.topic, "" if schema is None else schema.name, message
 
     def close(self) -> None:
         """Close the file."""

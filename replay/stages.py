@@ -11,7 +11,6 @@ prints nothing unless the application configures it (the CLI does for one log).
 
 from __future__ import annotations
 
-import base64
 import logging
 import os
 from collections.abc import Sequence
@@ -19,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pybase64
 from numpy.typing import NDArray
 
 from data_schemas.errors import ImageError
@@ -57,7 +57,7 @@ def decode_image(msg: dict[str, Any]) -> tuple[NDArray[np.uint8], bytes | None]:
         The PNG file as logged (CompressedImage), None for a raw frame.
     """
     try:
-        data = base64.b64decode(msg["data"], validate=True)
+        data = pybase64.b64decode(msg["data"], validate=True)  # SIMD; 3x the stdlib's speed
     except (KeyError, ValueError) as exc:
         raise ImageError(f"/camera/panorama: frame data is not base64 ({exc})") from None
     if "format" in msg:
@@ -152,10 +152,9 @@ class Runner:
 
     def _frames(self) -> None:
         keys_at = self.plan.keys_at()
-        for msg in self.log.messages([CAMERA_TOPIC]):
-            keys = keys_at.get(msg.publish_time_ns, [])
-            if not keys and not self.all_frames:
-                continue
+        # a frame's publish time is its timestamp: without all frames, read only keyframes
+        only = None if self.all_frames else keys_at
+        for msg in self.log.messages([CAMERA_TOPIC], publish_times_ns=only):
             doc = msg.decode()
             t_ns = ns_from_stamp(doc["timestamp"])
             keys = keys_at.get(t_ns, [])

@@ -7,9 +7,12 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
+
+if TYPE_CHECKING:
+    from replay.records import MethodConfig
 
 PRIOR_CHOICES = ("impartial", "gaussian", "mixture")
 
@@ -123,10 +126,7 @@ def process(
     each skipped movement is reported on stderr. Several logs run in parallel with one result
     line per log (skips are counted there); one failing log is reported and the others go on.
     """
-    from tqdm import tqdm
-
-    from replay.batch import expand_logs, plan_jobs, process_job
-    from replay.parallel import Outcome, run_tasks
+    from replay.batch import expand_logs
     from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
 
@@ -140,6 +140,24 @@ def process(
         else:
             click.echo(f"{paths[0]}: {result_line(doc)}")
         return
+    _process_many(paths, out, summary, method, workers, scheduler)
+
+
+def _process_many(
+    paths: list[Path],
+    out: Path | None,
+    summary: Path | None,
+    method: MethodConfig,
+    workers: int,
+    scheduler: str | None,
+) -> None:
+    """Many logs (or a Dask run): a pool, a progress bar and one result line per log."""
+    from tqdm import tqdm  # the pool, the bar and Dask only when there are many logs
+
+    from replay.batch import plan_jobs, process_job
+    from replay.parallel import Outcome, run_tasks
+    from replay.process import result_line
+
     jobs = plan_jobs(paths, out, summary, method)
 
     def report(outcome: Outcome[dict[str, Any]]) -> None:

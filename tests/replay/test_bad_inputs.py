@@ -8,8 +8,10 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from logfactory import session_doc, write_log
+from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from recorder.mcapout import MESSAGE_HEADER
 from replay.cli import cli
 
 
@@ -34,6 +36,17 @@ def _no_calibration() -> dict[str, str]:
     return {"json": json.dumps(doc)}
 
 
+def _damaged(log: Path) -> Path:
+    """``log`` with its first movement message overwritten where the index points at it."""
+    data = bytearray(log.read_bytes())
+    with log.open("rb") as f:
+        _, _, first = next(make_reader(f).iter_messages(topics=["/robot/movement"]))
+    record = data.index(first.data) - MESSAGE_HEADER.size
+    data[record] = 0x7F  # no longer a message record
+    log.write_bytes(data)
+    return log
+
+
 def _bad(tmp_path: Path, kind: str) -> Path:
     if kind == "not-mcap":
         p = tmp_path / "notes.mcap"
@@ -49,6 +62,8 @@ def _bad(tmp_path: Path, kind: str) -> Path:
         return _raw_mcap(tmp_path / "acme.mcap", {"json": json.dumps(session_doc())}, "acme.Widget")
     if kind == "missing":
         return tmp_path / "nowhere.mcap"
+    if kind == "damaged":
+        return _damaged(write_log(tmp_path / "damaged.mcap"))
     raise AssertionError(kind)
 
 
@@ -59,6 +74,7 @@ EXPECTED = {
     "no-calibration": "no camera calibration",
     "unknown-schema": "'acme.Widget', which this version of bearing-slam does not know",
     "missing": "no such file",
+    "damaged": "the log is damaged",
 }
 
 

@@ -14,8 +14,10 @@ import pytest
 from click.testing import CliRunner
 from logfactory import MOVES, write_log
 from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
 
 from data_schemas.codec import validate_message
+from recorder.logindex import LogIndex
 from replay.batch import LogJob, expand_logs, plan_jobs, process_job
 from replay.cli import cli
 from replay.parallel import SchedulerError, run_tasks
@@ -116,6 +118,56 @@ def test_derived_log_channels_validate(small_log: Path, tmp_path: Path) -> None:
     for name, mean in final.items():
         assert mean == pytest.approx(doc["landmarks"][name]["mean"], abs=1e-8)
     assert json.loads(meta["bslam.session"]["json"])["derived"]["source"] == small_log.name
+
+
+def _rewritten_by_mcap(log: Path, out: Path) -> Path:
+    """``log`` rewritten by mcap's own writer: small zstd chunks, so read by mcap's reader."""
+    with log.open("rb") as src, out.open("wb") as dst:
+        reader = make_reader(src)
+        writer = Writer(dst, chunk_size=32 * 1024, compression=CompressionType.ZSTD)
+        writer.start()
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, record.metadata)
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            assert schema is not None
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(
+                    schema.name, schema.encoding, schema.data
+                )
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id], channel.metadata
+                )
+            writer.add_message(
+                channels[channel.id],
+                message.log_time,
+                message.data,
+                message.publish_time,
+                message.sequence,
+            )
+        writer.finish()
+    return out
+
+
+def test_log_of_another_writer_gives_the_same_results(small_log: Path, tmp_path: Path) -> None:
+    """Read in place (the recorder's stored chunks) or by mcap (compressed): same outputs."""
+    other = _rewritten_by_mcap(small_log, tmp_path / "zstd.mcap")
+    for path, in_place in ((small_log, True), (other, False)):
+        with path.open("rb") as f:
+            assert (LogIndex.of(f, make_reader(f).get_summary()) is not None) == in_place
+    method = MethodConfig(n_r=20, n_l=40)
+    ours = process_log(small_log, method, out=tmp_path / "a.mcap")
+    theirs = process_log(other, method, out=tmp_path / "b.mcap")
+    assert theirs == {**ours, "log": other.name}
+    derived = []
+    for path in (tmp_path / "a.mcap", tmp_path / "b.mcap"):
+        with path.open("rb") as f:
+            derived.append(
+                [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages()]
+            )
+    assert derived[0] == derived[1]
 
 
 def _hide_l1_in_movement_1(i: int, phase: str) -> tuple[str, ...]:

@@ -1,0 +1,157 @@
+"""LogIndex reads messages in place and gives exactly what mcap's indexed reader gives."""
+
+from __future__ import annotations
+
+import io
+from typing import Any
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, IndexType, Writer
+
+from recorder.logindex import DamagedLogError, LogIndex
+from recorder.mcapout import MESSAGE_HEADER, McapChunkWriter
+
+
+def _recorded(seed: int = 3) -> bytes:
+    """Three channels over four stored chunks: log times out of order inside a chunk, ties
+    between channels and chunks, time ranges of chunks overlapping, one channel absent from a
+    chunk, empty and large payloads."""
+    rng = np.random.default_rng(seed)
+    out = io.BytesIO()
+    mcap = McapChunkWriter(out, library="test")
+    mcap.start({})
+    schema = mcap.add_schema("s", "jsonschema", b"{}")
+    channels = [mcap.add_channel(t, "json", schema) for t in ("/a", "/b", "/c")]
+    seq = 0
+    for chunk in range(4):
+        for _ in range(25):
+            channel = int(rng.integers(0, 3 if chunk != 2 else 2))
+            t_ns = 1000 + 10 * int(rng.integers(0, 40))  # ties in and across chunks
+            seq += 1
+            data = rng.bytes(int(rng.choice([0, 5, 70_000])))
+            mcap.add_message(channels[channel], seq, t_ns, t_ns + seq, [data])
+        assert mcap.close_chunk()
+    mcap.finish()
+    return out.getvalue()
+
+
+def _tuples(messages: Any) -> list[tuple[int, int, int, int, bytes]]:
+    return [(m.channel_id, m.sequence, m.log_time, m.publish_time, m.data) for m in messages]
+
+
+def _index(data: bytes) -> tuple[LogIndex, Any]:
+    stream = io.BytesIO(data)
+    reader = make_reader(stream)
+    index = LogIndex.of(stream, reader.get_summary())
+    assert index is not None
+    return index, reader
+
+
+@pytest.mark.parametrize(
+    ("topics", "bounds"),
+    [
+        (["/a", "/b", "/c"], (None, None)),
+        (["/b"], (None, None)),
+        (["/a", "/c"], (5, 20)),  # log times of their 5th and 20th message: [start, end)
+        (["/c"], (12, None)),
+        (["/a"], (None, 0)),
+    ],
+)
+def test_same_messages_and_order_as_mcap(
+    topics: list[str], bounds: tuple[int | None, int | None]
+) -> None:
+    index, reader = _index(_recorded())
+    times = [m.log_time for _, _, m in reader.iter_messages(topics, log_time_order=True)]
+    start_ns, end_ns = (None if k is None else times[k] for k in bounds)
+    ids = [i for i, c in reader.get_summary().channels.items() if c.topic in topics]
+    expected = _tuples(
+        m
+        for _, _, m in reader.iter_messages(
+            topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=True
+        )
+    )
+    got = _tuples(index.messages(ids, start_ns=start_ns, end_ns=end_ns))
+    assert got == expected
+    assert len(got) > 0 or bounds == (None, 0)
+    if start_ns is not None:
+        assert got[0][2] == start_ns  # the start bound is inclusive
+
+
+def test_publish_time_filter_keeps_only_those() -> None:
+    index, reader = _index(_recorded())
+    everything = _tuples(index.messages(list(reader.get_summary().channels)))
+    chosen = {everything[i][3] for i in (0, 7, 40)}
+    got = _tuples(index.messages(list(reader.get_summary().channels), publish_times_ns=chosen))
+    assert got == [m for m in everything if m[3] in chosen]
+
+
+def test_compressed_or_unindexed_logs_are_left_to_mcap() -> None:
+    for compression, indexes in (
+        (CompressionType.ZSTD, IndexType.ALL),
+        (CompressionType.NONE, IndexType.ALL & ~IndexType.MESSAGE),
+    ):
+        out = io.BytesIO()
+        writer = Writer(out, compression=compression, index_types=indexes)
+        writer.start()
+        schema = writer.register_schema("s", "jsonschema", b"{}")
+        channel = writer.register_channel("/a", "json", schema)
+        writer.add_message(channel, 1, b"{}", 1)
+        writer.finish()
+        out.seek(0)
+        assert LogIndex.of(out, make_reader(out).get_summary()) is None
+
+
+def test_uncompressed_mcap_writer_log_is_read_in_place() -> None:
+    out = io.BytesIO()
+    writer = Writer(out, compression=CompressionType.NONE)
+    writer.start()
+    schema = writer.register_schema("s", "jsonschema", b"{}")
+    channel = writer.register_channel("/a", "json", schema)
+    for t in (30, 10, 20):
+        writer.add_message(channel, t, b'{"t": %d}' % t, t + 1)
+    writer.finish()
+    index, reader = _index(out.getvalue())
+    assert _tuples(index.messages([channel])) == _tuples(m for _, _, m in reader.iter_messages())
+
+
+def _one_chunk() -> bytes:
+    out = io.BytesIO()
+    mcap = McapChunkWriter(out, library="test")
+    mcap.start({})
+    channel = mcap.add_channel("/a", "json", mcap.add_schema("s", "jsonschema", b"{}"))
+    for n in range(3):
+        mcap.add_message(channel, n + 1, 10 * n, 10 * n, [b'{"n": %d}' % n])
+    mcap.finish()
+    return out.getvalue()
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        (0, b"\x7f", "no message of channel 1"),  # opcode
+        (9, (7).to_bytes(2, "little"), "no message of channel 1"),  # channel id
+        (15, (11).to_bytes(8, "little"), "no message of channel 1"),  # log time
+        (1, (10**6).to_bytes(8, "little"), "cut short"),  # record length past the file
+    ],
+)
+def test_index_not_matching_the_message_is_damage(field: int, value: bytes, match: str) -> None:
+    data = bytearray(_one_chunk())
+    record = data.index(b'{"n": 1}') - MESSAGE_HEADER.size
+    data[record + field : record + field + len(value)] = value
+    index, _ = _index(bytes(data))
+    with pytest.raises(DamagedLogError, match=match):
+        list(index.messages([1]))
+
+
+def test_index_past_the_end_of_the_file_is_damage() -> None:
+    data = _one_chunk()
+    stream = io.BytesIO(data)
+    summary = make_reader(stream).get_summary()
+    index = LogIndex.of(stream, summary)
+    assert index is not None
+    list(index.messages([1]))  # the index is read from the whole file
+    stream.truncate(data.index(b'{"n": 1}') - 10)
+    with pytest.raises(DamagedLogError, match="past the end"):
+        list(index.messages([1]))
