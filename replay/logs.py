@@ -1,9 +1,11 @@
 """Open a finished bearing-slam log for processing: checks first, then messages in log-time order.
 
 Built on :class:`recorder.logread.LogReader` (which recognises a file that is not MCAP or is
-unfinished) and mcap's indexed reader (channels, time ranges, log-time order). Every problem a
-user can cause is one line: not MCAP, unfinished (``bslam recover``), no session metadata, no
-camera calibration, a channel with a schema this version does not know.
+unfinished) and the log's indexes (channels, time ranges, log-time order): messages are read in
+place through :class:`recorder.logindex.LogIndex` when the chunks are stored (the recorder's
+logs), by mcap's reader otherwise. Every problem a user can cause is one line: not MCAP,
+unfinished (``bslam recover``), no session metadata, no camera calibration, a channel with a
+schema this version does not know, a damaged log.
 """
 
 from __future__ import annotations
@@ -157,7 +159,7 @@ class ProcessableLog:
                 yield (*names[message.channel_id], message)
             return
         for schema, channel, message in self._reader.iter_messages(
-            topics=topics, start_time=start_ns, end_time=end_ns, log_time_order=True
+            topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=True
         ):
             if publish_times_ns is None or message.publish_time in publish_times_ns:
                 yield channel.topic, "" if schema is None else schema.name, message
