@@ -36,29 +36,53 @@ class DamagedLogError(McapError):
 
 
 class LogIndex:
-    """The message indexes of a finished log whose chunks are all stored uncompressed.
+    """Where every message of a finished log lies (see :meth:`of`), and reading them there.
 
     Parameters
     ----------
     stream : binary file (seekable)
         The open log; read, never closed here.
-    summary : mcap.summary.Summary
-        Its summary section (chunk indexes).
+    places : dict channel id -> list of (log time, records offset, offset, channel id)
+        Every message's place, from the log's message indexes.
     """
 
-    def __init__(self, stream: IO[bytes], summary: Summary) -> None:
+    def __init__(self, stream: IO[bytes], places: dict[int, list[_Place]]) -> None:
         self._stream = stream
-        self._summary = summary
-        self._places: dict[int, list[_Place]] | None = None
+        self._places = places
 
     @classmethod
     def of(cls, stream: IO[bytes], summary: Summary | None) -> LogIndex | None:
-        """The index of a log that has one and stores its chunks uncompressed, else None."""
+        """The index of a log whose chunks are stored and all indexed, else None.
+
+        Reads the message indexes after each chunk (small records) and nothing else. None when
+        a chunk is compressed, when chunks or message indexes are missing, or when the indexes
+        do not count every message of the summary's statistics.
+        """
         if summary is None or not summary.chunk_indexes:
             return None
         if any(c.compression or not c.message_index_length for c in summary.chunk_indexes):
             return None
-        return cls(stream, summary)
+        places: dict[int, list[_Place]] = {}
+        for chunk in summary.chunk_indexes:
+            records_at = chunk.chunk_start_offset + STORED_CHUNK_HEADER.size
+            stream.seek(chunk.chunk_start_offset + chunk.chunk_length)
+            block = stream.read(chunk.message_index_length)
+            pos = 0
+            while pos + RECORD_HEADER.size + _INDEX_FIELDS.size <= len(block):
+                opcode, length = RECORD_HEADER.unpack_from(block, pos)
+                body = pos + RECORD_HEADER.size
+                if opcode == Opcode.MESSAGE_INDEX:
+                    channel_id, size = _INDEX_FIELDS.unpack_from(block, body)
+                    first = body + _INDEX_FIELDS.size
+                    places.setdefault(channel_id, []).extend(
+                        (log_time_ns, records_at, offset, channel_id)
+                        for log_time_ns, offset in _ENTRY.iter_unpack(block[first : first + size])
+                    )
+                pos = body + length
+        counted = sum(len(p) for p in places.values())
+        if summary.statistics is None or counted != summary.statistics.message_count:
+            return None
+        return cls(stream, places)
 
     def messages(
         self,
@@ -78,41 +102,16 @@ class LogIndex:
         DamagedLogError
             An index entry points outside the file or at something else than its message.
         """
-        places = self._index()
         wanted = sorted(
             p
             for c in channel_ids
-            for p in places.get(c, ())
+            for p in self._places.get(c, ())
             if (start_ns is None or p[0] >= start_ns) and (end_ns is None or p[0] < end_ns)
         )
         for place in wanted:
             message = self._read(place, publish_times_ns)
             if message is not None:
                 yield message
-
-    def _index(self) -> dict[int, list[_Place]]:
-        """Channel id -> its messages' places (every chunk's message indexes, read once)."""
-        if self._places is not None:
-            return self._places
-        places: dict[int, list[_Place]] = {}
-        for chunk in self._summary.chunk_indexes:
-            records_at = chunk.chunk_start_offset + STORED_CHUNK_HEADER.size
-            self._stream.seek(chunk.chunk_start_offset + chunk.chunk_length)
-            block = self._stream.read(chunk.message_index_length)
-            pos = 0
-            while pos + RECORD_HEADER.size + _INDEX_FIELDS.size <= len(block):
-                opcode, length = RECORD_HEADER.unpack_from(block, pos)
-                body = pos + RECORD_HEADER.size
-                if opcode == Opcode.MESSAGE_INDEX:
-                    channel_id, size = _INDEX_FIELDS.unpack_from(block, body)
-                    first = body + _INDEX_FIELDS.size
-                    places.setdefault(channel_id, []).extend(
-                        (log_time_ns, records_at, offset, channel_id)
-                        for log_time_ns, offset in _ENTRY.iter_unpack(block[first : first + size])
-                    )
-                pos = body + length
-        self._places = places
-        return places
 
     def _read(self, place: _Place, publish_times_ns: Container[int] | None) -> Message | None:
         log_time_ns, records_at, offset, channel_id = place

@@ -148,10 +148,17 @@ def test_index_not_matching_the_message_is_damage(field: int, value: bytes, matc
 def test_index_past_the_end_of_the_file_is_damage() -> None:
     data = _one_chunk()
     stream = io.BytesIO(data)
-    summary = make_reader(stream).get_summary()
-    index = LogIndex.of(stream, summary)
+    index = LogIndex.of(stream, make_reader(stream).get_summary())
     assert index is not None
-    list(index.messages([1]))  # the index is read from the whole file
     stream.truncate(data.index(b'{"n": 1}') - 10)
     with pytest.raises(DamagedLogError, match="past the end"):
         list(index.messages([1]))
+
+
+def test_indexes_missing_a_channel_are_left_to_mcap() -> None:
+    data = bytearray(_recorded())
+    summary = make_reader(io.BytesIO(bytes(data))).get_summary()
+    assert summary is not None
+    assert LogIndex.of(io.BytesIO(bytes(data)), summary) is not None
+    data[summary.chunk_indexes[1].message_index_offsets[2]] = 0x7F  # no longer an index record
+    assert LogIndex.of(io.BytesIO(bytes(data)), summary) is None
