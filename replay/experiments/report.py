@@ -21,6 +21,7 @@ from replay.experiments.stats import (
     movement_curve,
     n_l_curve,
     paired_difference,
+    paired_ratio,
     per_run,
     select,
 )
@@ -28,7 +29,10 @@ from replay.experiments.stats import (
 
 @dataclass(frozen=True)
 class MethodRow:
-    """One method's line of the comparison table (errors in cm over the scored landmarks)."""
+    """One method's line of the comparison table (errors in cm over the scored landmarks).
+
+    The ratios to batch least squares are taken over the runs where both have an estimate.
+    """
 
     method: str
     early: Band
@@ -64,7 +68,6 @@ def method_table(results: Results, *, group: str | None = None) -> list[MethodRo
         )
         for m in cfg["methods"]
     }
-    ls = curves.get("batch_ls", {})
 
     def run_values(method: str, movement: int) -> dict[int, float]:
         chosen = select(
@@ -81,8 +84,12 @@ def method_table(results: Results, *, group: str | None = None) -> list[MethodRo
     for method, curve in curves.items():
         early = curve.get(early_m, _nan_band())
         final = curve.get(final_m, _nan_band())
-        ls_early = ls.get(early_m, _nan_band()).mean
-        ls_final = ls.get(final_m, _nan_band()).mean
+        ratios = [
+            paired_ratio(run_values(method, m), run_values("batch_ls", m))
+            if "batch_ls" in curves
+            else math.nan
+            for m in (early_m, final_m)
+        ]
         n_l = _n_l(cfg, method, group)
         coverage, _ = calibration(
             select(results.rows, method=method, n_l=n_l, landmarks=scored, group=group)
@@ -95,8 +102,8 @@ def method_table(results: Results, *, group: str | None = None) -> list[MethodRo
                 method,
                 early,
                 final,
-                early.mean / ls_early if ls_early > 0 else math.nan,
-                final.mean / ls_final if ls_final > 0 else math.nan,
+                ratios[0],
+                ratios[1],
                 coverage,
                 vs,
             )

@@ -128,6 +128,19 @@ def paired_difference(a: dict[int, float], b: dict[int, float]) -> PairedDiffere
     return PairedDifference(float(d.mean()), std, p, len(d))
 
 
+def paired_ratio(a: dict[int, float], b: dict[int, float]) -> float:
+    """Mean of ``a`` over mean of ``b``, both over the runs both have (NaN: none, or ``b`` 0).
+
+    A method with no estimate in some runs (its first movements skipped) is compared with the
+    yardstick on its own runs only, not with the yardstick's mean over every run.
+    """
+    runs = sorted(set(a) & set(b))
+    if not runs:
+        return math.nan
+    den = float(np.mean([b[r] for r in runs]))
+    return float(np.mean([a[r] for r in runs])) / den if den > 0.0 else math.nan
+
+
 def calibration(rows: Iterable[ErrorRow]) -> tuple[float, int]:
     """Fraction of estimates whose 80% region holds the truth, and how many were checked."""
     flags = [r.inside_80 for r in rows if r.inside_80 is not None]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,15 @@ from replay.experiments.results import (
 )
 from replay.experiments.rrd import write_rrd
 from replay.experiments.scoring import inside_region
-from replay.experiments.stats import band, calibration, movement_curve, paired_difference
+from replay.experiments.stats import (
+    band,
+    calibration,
+    movement_curve,
+    paired_difference,
+    paired_ratio,
+    per_run,
+    select,
+)
 
 METHODS = ["impartial", "gaussian", "mixture", "batch_ls", "crb"]
 SCALE = {"impartial": 1.0, "gaussian": 1.5, "mixture": 1.05, "batch_ls": 0.7, "crb": 0.5}
@@ -96,6 +105,31 @@ def test_band_and_paired_difference() -> None:
     assert d.mean == pytest.approx(1.0, abs=0.02) and d.p_value < 1e-6 and d.n == 20
     same = paired_difference(runs, runs)
     assert same.mean == 0.0 and same.p_value == 1.0
+
+
+def test_ratio_to_batch_ls_on_shared_runs() -> None:
+    assert paired_ratio({0: 2.0, 1: 4.0}, {0: 1.0, 1: 2.0, 2: 100.0}) == pytest.approx(2.0)
+    assert math.isnan(paired_ratio({0: 1.0}, {1: 1.0}))
+    # run 0 has no impartial estimate after 3 movements and a large least-squares error: it
+    # must not enter the least-squares side of the impartial ratio
+    res = synthetic()
+    res.rows = [
+        r if r.method != "batch_ls" or r.run != 0 else replace(r, error_cm=50.0)
+        for r in res.rows
+        if not (r.method == "impartial" and r.run == 0 and r.movement == 3)
+    ]
+    row = next(r for r in method_table(res) if r.method == "impartial")
+    values = {
+        m: per_run(select(res.rows, method=m, n_l=n, movement=3, landmarks=["L3", "L4"]))
+        for m, n in (("impartial", 300), ("batch_ls", 0))
+    }
+    shared = [r for r in values["batch_ls"] if r in values["impartial"]]
+    expected = np.mean([values["impartial"][r] for r in shared]) / np.mean(
+        [values["batch_ls"][r] for r in shared]
+    )
+    assert 0 not in values["impartial"] and len(shared) == 11
+    assert row.ratio_to_ls_early == pytest.approx(expected)
+    assert row.ratio_to_ls_early > row.early.mean / np.mean(list(values["batch_ls"].values()))
 
 
 def test_inside_region_matches_chi2() -> None:
