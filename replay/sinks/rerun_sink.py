@@ -48,6 +48,7 @@ LOG_TIME = "log_time"
 MOVEMENT = "movement"
 Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
 FR_APEXES = ((0.0, 0.0), (1.0, 0.0))
+ELLIPSE_RGB = (190, 150, 255)  # 80% regions: a hue no landmark class uses
 TRUTH_RGB = (240, 240, 240)
 TRAJECTORY_RGB = (255, 160, 0)
 #: frames gathered before their entities are sent (as columns) to the recording
@@ -333,7 +334,13 @@ class RerunSink:
         for n in names:
             log(
                 f"map/ellipses/{n}",
-                rr.LineStrips2D([record.estimates[n].ellipse80_fl], colors=[self._rgb[n]]),
+                # its own hue and thicker than the particles, so the region shows over its own cloud
+                rr.LineStrips2D(
+                    [record.estimates[n].ellipse80_fl],
+                    colors=[ELLIPSE_RGB],
+                    radii=rr.Radius.ui_points(1.5),
+                    labels=[f"{n} 80%"],
+                ),
             )
         if record.o1_fl is not None and record.o2_fl is not None:
             log(
