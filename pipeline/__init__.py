@@ -4,7 +4,7 @@ from pipeline.cones import ConeIntersection, Degenerate, intersect_cones, vision
 from pipeline.crb import cramer_rao_bound, fisher_information, truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import change_frame
-from pipeline.fusion import fuse, fuse_likelihood
+from pipeline.fusion import LikelihoodUpdate, fuse, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
 from pipeline.likelihood import FrameLikelihood
 from pipeline.priors import (
@@ -40,6 +40,7 @@ __all__ = [
     "GaussianPrior",
     "ImpartialPrior",
     "LandmarkEstimate",
+    "LikelihoodUpdate",
     "MixturePrior",
     "MovementObservation",
     "MovementResult",

@@ -34,7 +34,7 @@ from pipeline.cones import (
 )
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import FrameChange, change_frame
-from pipeline.fusion import fuse, fuse_likelihood
+from pipeline.fusion import LikelihoodUpdate, fuse, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
 from pipeline.likelihood import N_FRAMES, FrameLikelihood
 from pipeline.priors import R_MAX_FR, R_MIN_FR, ImpartialPrior, PriorName, make_prior
@@ -78,6 +78,9 @@ class MovementResult:
         Landmarks whose belief this movement changed (started or updated). With
         ``fusion="likelihood"`` a landmark with degenerate cones is still fused once it has a
         belief: its bearings' likelihood needs no bounded ``A_i``.
+    defensive : list of str
+        Landmarks of ``fused`` whose likelihood update used the defensive mixture proposal
+        (:func:`pipeline.fusion.fuse_likelihood`: the belief alone was a poor proposal).
     cones_fr : dict of name -> (cone at O1, cone at O2), polygons (k, 2) FR
     particles_fr : dict of name -> (n_r, 2) FR, reference pair included
     particles_fl : dict of name -> (n_l, 2) FL, this movement's ``p_t`` (non-reference)
@@ -92,6 +95,7 @@ class MovementResult:
     status: str
     skipped_landmarks: dict[str, str] = field(default_factory=dict)
     fused: list[str] = field(default_factory=list)
+    defensive: list[str] = field(default_factory=list)
     cones_fr: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
         default_factory=dict
     )
@@ -253,10 +257,17 @@ class BearingSlam:
         frame: FrameLikelihood,
         b1: float,
         b2: float,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        new_fl: NDArray[np.float64] | None,
+    ) -> LikelihoodUpdate | None:
         lik = partial(frame, bearing_o1_rad=b1, bearing_o2_rad=b2, rng=self.rng)
         return fuse_likelihood(
-            prev[0], lik, self.n_l, self.rng, prev_weights=prev[1], n_proposal=self.n_proposal
+            prev[0],
+            lik,
+            self.n_l,
+            self.rng,
+            prev_weights=prev[1],
+            new_fl=new_fl,
+            n_proposal=self.n_proposal,
         )
 
     def process_movement(self, obs: MovementObservation) -> MovementResult:
@@ -294,12 +305,14 @@ class BearingSlam:
             b2 = obs.bearings_o2_rad.get(name)
             if b1 is None or b2 is None or not (math.isfinite(b1) and math.isfinite(b2)):
                 continue
-            q = self._fuse_likelihood(prev, frame, float(b1), float(b2))
+            q = self._fuse_likelihood(prev, frame, float(b1), float(b2), p_t)
             if q is None:
                 res.skipped_landmarks[name] = "bearings have zero likelihood under the belief"
                 continue
-            self._set_belief(name, *q)
+            self._set_belief(name, q.points_fl, q.weights)
             res.fused.append(name)
+            if q.defensive:
+                res.defensive.append(name)
         self._trajectory.append((fl.o1_fl, fl.o2_fl))
         self.used_movements.append(obs.index)
         res.particles_fl = fl.landmarks_fl

@@ -101,6 +101,21 @@ def test_likelihood_fusion_step(benchmark: Any) -> None:
 
 
 @pytest.mark.benchmark(group="fusion")
+def test_likelihood_fusion_step_defensive(benchmark: Any) -> None:
+    """A wide belief (sd 0.5) around a narrow likelihood: plain draws + 4800 defensive draws."""
+    pool1, pool2, (b1, b2), prev = _likelihood_case()
+    rng = np.random.default_rng(4)
+    frame = FrameLikelihood(pool1, pool2, ImpartialPrior(EPS))
+    lik = partial(frame, bearing_o1_rad=b1, bearing_o2_rad=b2, rng=rng)
+    centre = prev.mean(axis=0)
+    wide = rng.normal(centre + 0.5, 0.5, (300, 2))
+    new_fl = rng.normal(centre, 0.1, (300, 2))
+    res = fuse_likelihood(wide, lik, 300, rng, new_fl=new_fl)
+    assert res is not None and res.defensive
+    benchmark(fuse_likelihood, wide, lik, 300, rng, new_fl=new_fl)
+
+
+@pytest.mark.benchmark(group="fusion")
 def test_likelihood_frame_per_movement(benchmark: Any) -> None:
     """What a movement pays once for all its landmarks: sorting the two 1024-particle pools."""
     pool1, pool2, _, _ = _likelihood_case()

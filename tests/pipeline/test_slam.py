@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from pipeline import BearingSlam, MovementObservation, batch_least_squares
+from pipeline import BearingSlam, MovementObservation, MovementResult, batch_least_squares
 from pipeline.synthetic import PAPER_REFERENCE, simulate_bearings
 
 EPS = math.radians(3.0)
@@ -37,11 +37,28 @@ class Trials:
     err_final: np.ndarray  # (seeds, 2)
     err_ls: np.ndarray  # (seeds, 2): LS on the same bearings the filter used, per landmark
     covered: np.ndarray  # (seeds, 2)
+    updates: Updates
+
+
+@dataclass
+class Updates:
+    """Likelihood updates of beliefs (not first sets) over the trials, and how they went."""
+
+    total: int = 0
+    defensive: int = 0  # used the defensive mixture proposal
+    zero: int = 0  # skipped: zero likelihood under the belief
+
+    def count(self, known: set[str], res: MovementResult) -> None:
+        self.total += len(known & set(res.fused))
+        self.defensive += len(res.defensive)
+        reasons = res.skipped_landmarks.values()
+        self.zero += sum(r.startswith("bearings have zero likelihood") for r in reasons)
 
 
 @pytest.fixture(scope="module")
 def trials() -> Trials:
     by_move, final, ls, cov = [], [], [], []
+    updates = Updates()
     for seed in SEEDS:
         rng = np.random.default_rng(seed)
         run = simulate_bearings(N_MOVES, rng, eps_rad=EPS)
@@ -49,7 +66,10 @@ def trials() -> Trials:
         slam = BearingSlam(NAMES, PAPER_REFERENCE, vision_error_rad=EPS, rng=rng)
         rows = []
         for obs in run.observations:
-            est = slam.process_movement(obs).estimates
+            known = set(slam.estimates)
+            res = slam.process_movement(obs)
+            updates.count(known, res)
+            est = res.estimates
             rows.append(
                 [
                     np.linalg.norm(est[n].mean_fl - truth[n]) if n in est else np.nan
@@ -68,7 +88,7 @@ def trials() -> Trials:
             )
             row.append(np.linalg.norm(sol[n] - truth[n]))
         ls.append(row)
-    return Trials(np.array(by_move), np.array(final), np.array(ls), np.array(cov))
+    return Trials(np.array(by_move), np.array(final), np.array(ls), np.array(cov), updates)
 
 
 def test_error_falls_with_movements(trials: Trials) -> None:
@@ -85,6 +105,34 @@ def test_particle_error_is_close_to_batch_least_squares(trials: Trials) -> None:
 def test_credible_region_is_calibrated(trials: Trials) -> None:
     rate = trials.covered.mean()
     assert 0.70 <= rate <= 0.90, f"80% region covers the truth in {rate:.2%} of trials"
+
+
+def test_defensive_proposal_trigger_rate(trials: Trials) -> None:
+    # measured on these seeds: 135 of 1252 updates (10.8%); none has zero likelihood
+    u = trials.updates
+    assert u.total > 1000
+    assert 0.05 <= u.defensive / u.total <= 0.20, f"{u.defensive} of {u.total}"
+    assert u.zero == 0
+
+
+def test_defensive_proposal_trigger_rate_short_moves() -> None:
+    """Movements of 8-12 cm: first beliefs from little parallax, wide (docs/method.md)."""
+    updates = Updates()
+    final = []
+    for seed in SEEDS:
+        rng = np.random.default_rng(seed)
+        run = simulate_bearings(N_MOVES, rng, eps_rad=EPS, move_m=(0.08, 0.12))
+        truth = run.truth_fl()
+        slam = BearingSlam(NAMES, PAPER_REFERENCE, vision_error_rad=EPS, rng=rng)
+        for obs in run.observations:
+            known = set(slam.estimates)
+            updates.count(known, slam.process_movement(obs))
+        final += [np.linalg.norm(e.mean_fl - truth[n]) for n, e in slam.estimates.items()]
+    # measured: 101 of 850 updates (11.9%), none with zero likelihood; error 0.187
+    assert updates.total > 700
+    assert 0.05 <= updates.defensive / updates.total <= 0.20, f"{updates.defensive}"
+    assert updates.zero == 0
+    assert float(np.mean(final)) < 0.25
 
 
 def test_skipped_movement_leaves_state_unchanged() -> None:
