@@ -1,15 +1,30 @@
-"""Frames from the log (bytes) to BGR images; lossless encodings only."""
+"""Frames from the log (bytes) to BGR images; lossless encodings only.
+
+PNG frames in the recorder's own layout (``recorder.png``: 8-bit RGB, not interlaced, rows
+filtered NONE or SUB, only IHDR, IDAT and IEND chunks) are decoded here with ISA-L's inflate and
+a numpy running sum, more than twice as fast as OpenCV and to the same pixels; any other PNG,
+and any damaged one (chunk CRC, zlib stream, size), is left to OpenCV.
+"""
 
 from __future__ import annotations
 
+import struct
+
 import cv2
 import numpy as np
+from isal import isal_zlib
 from numpy.typing import NDArray
 
 from data_schemas.errors import ImageError
 
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 _LOSSY = ("jpeg", "jpg", "webp", "avif", "heic", "h264", "h265")
+#: A chunk's length and type; its data and a CRC-32 of type and data follow.
+_CHUNK_HEAD = struct.Struct(">I4s")
+#: IHDR: width, height, bit depth, colour type, compression, filter method, interlace.
+_IHDR = struct.Struct(">IIBBBBB")
+_RGB8_PLAIN = (8, 2, 0, 0, 0)
+_FILTER_SUB = 1
 
 
 def decode_frame(
@@ -48,6 +63,9 @@ def decode_frame(
     if kind == "png":
         if not data.startswith(_PNG_MAGIC):
             raise ImageError("frame says format 'png' but its bytes are not a PNG image")
+        plain = _decode_plain_png(data)
+        if plain is not None:
+            return plain
         image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
         if image is None:
             raise ImageError("frame's PNG data is corrupt or truncated and cannot be decoded")
@@ -68,3 +86,48 @@ def decode_frame(
             f"frame encoding {fmt!r} is lossy; bearings need lossless frames (png or bgr8)"
         )
     raise ImageError(f"unknown frame encoding {fmt!r}; expected 'png' or 'bgr8'")
+
+
+def _decode_plain_png(data: bytes) -> NDArray[np.uint8] | None:
+    """BGR pixels of a PNG in the recorder's layout, or None for any other (or damaged) PNG."""
+    chunks = _chunks(data)  # the last is IEND
+    if chunks is None or chunks[0][0] != b"IHDR" or len(chunks[0][1]) != _IHDR.size:
+        return None
+    if any(kind != b"IDAT" for kind, _ in chunks[1:-1]):
+        return None  # palette, transparency, gamma, EXIF...: OpenCV's business
+    width, height, *layout = _IHDR.unpack(chunks[0][1])
+    if tuple(layout) != _RGB8_PLAIN or not width or not height:
+        return None
+    try:
+        raw = isal_zlib.decompress(b"".join(body for kind, body in chunks if kind == b"IDAT"))
+    except isal_zlib.error:  # type: ignore[misc]  # (the stub declares an instance)
+        return None
+    if len(raw) != height * (1 + 3 * width):
+        return None
+    rows = np.frombuffer(raw, np.uint8).reshape(height, 1 + 3 * width)
+    if np.any(rows[:, 0] > _FILTER_SUB):
+        return None  # UP, AVERAGE, PAETH rows
+    sub = rows[:, 0] == _FILTER_SUB
+    rgb = rows[:, 1:].reshape(height, width, 3)
+    if np.any(sub):
+        rgb = rgb.copy()
+        rgb[sub] = np.cumsum(rgb[sub], axis=1, dtype=np.uint8)  # SUB: running sum mod 256
+    return np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), dtype=np.uint8)
+
+
+def _chunks(data: bytes) -> list[tuple[bytes, memoryview]] | None:
+    """(type, data) of each chunk up to IEND, or None if one is cut short or fails its CRC."""
+    view = memoryview(data)
+    pos = len(_PNG_MAGIC)
+    found: list[tuple[bytes, memoryview]] = []
+    while not found or found[-1][0] != b"IEND":
+        if pos + _CHUNK_HEAD.size > len(data):
+            return None
+        length, kind = _CHUNK_HEAD.unpack_from(data, pos)
+        end = pos + _CHUNK_HEAD.size + length
+        crc = view[end : end + 4]
+        if len(crc) != 4 or isal_zlib.crc32(view[pos + 4 : end]) != int.from_bytes(crc, "big"):
+            return None
+        found.append((kind, view[pos + _CHUNK_HEAD.size : end]))
+        pos = end + 4
+    return found
