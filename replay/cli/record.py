@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from replay.cli.recording import frame_options
+
 
 def _distance_range(text: str) -> tuple[float, float]:
     parts = text.split(",")
@@ -53,28 +55,7 @@ def _distance_range(text: str) -> tuple[float, float]:
     "--turn-deg", type=float, default=None, help="Fixed turn before each drive (default random)."
 )
 @click.option("--seed", type=int, default=None, help="Seed of the random turns and distances.")
-@click.option(
-    "--rate",
-    "frame_rate_hz",
-    type=click.FloatRange(min=0, min_open=True),
-    default=5.0,
-    show_default=True,
-    help="Frames per second while driving.",
-)
-@click.option(
-    "--encoding",
-    type=click.Choice(["png", "bgr8"]),
-    default="png",
-    show_default=True,
-    help="Frame storage (both lossless).",
-)
-@click.option(
-    "--png-level",
-    type=click.IntRange(0, 3),
-    default=1,
-    show_default=True,
-    help="PNG compression: 0 stored (fastest), 1 fast (half size), up to 3.",
-)
+@frame_options
 @click.option(
     "--baud",
     type=int,

@@ -5,12 +5,49 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
 if TYPE_CHECKING:
     from recorder.record import Progress, RecordResult
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def frame_options(func: F) -> F:
+    """The frame-capture options shared by ``record`` and ``simulate``.
+
+    Adds ``--rate`` (``frame_rate_hz``), ``--encoding`` and ``--png-level``.
+    """
+    for option in reversed(
+        (
+            click.option(
+                "--rate",
+                "frame_rate_hz",
+                type=click.FloatRange(min=0, min_open=True),
+                default=5.0,
+                show_default=True,
+                help="Frames per second while driving (virtual time when simulating).",
+            ),
+            click.option(
+                "--encoding",
+                type=click.Choice(["png", "bgr8"]),
+                default="png",
+                show_default=True,
+                help="Frame storage (both lossless).",
+            ),
+            click.option(
+                "--png-level",
+                type=click.IntRange(0, 3),
+                default=1,
+                show_default=True,
+                help="PNG compression: 0 stored (fastest), 1 fast (half size), up to 3.",
+            ),
+        )
+    ):
+        func = option(func)
+    return func
 
 
 def run_recording(

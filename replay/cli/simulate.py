@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from replay.cli.recording import frame_options
+
 
 @click.command("simulate")
 @click.option(
@@ -14,17 +16,7 @@ import click
 )
 @click.option("--out", required=True, type=click.Path(dir_okay=False), help="Log to write.")
 @click.option("--seed", type=int, default=None, help="Replaces the scenario's trajectory.seed.")
-@click.option(
-    "--rate",
-    "frame_rate_hz",
-    type=click.FloatRange(min=0, min_open=True),
-    default=5.0,
-    show_default=True,
-    help="Frames per second while driving (virtual time).",
-)
-@click.option(
-    "--png-level", type=click.IntRange(0, 3), default=1, show_default=True, help="PNG level."
-)
+@frame_options
 @click.option(
     "--turn-noise",
     type=click.FloatRange(min=0),
@@ -44,6 +36,7 @@ def simulate(
     out: str,
     seed: int | None,
     frame_rate_hz: float,
+    encoding: str,
     png_level: int,
     turn_noise: float,
     distance_noise: float,
@@ -66,7 +59,11 @@ def simulate(
     if seed is not None:
         scenario = scenario.with_seed(seed)
     settings = SimSettings(
-        RecordSettings(frame_rate_hz=frame_rate_hz, png_level=png_level),
+        RecordSettings(
+            frame_rate_hz=frame_rate_hz,
+            encoding="png" if encoding == "png" else "bgr8",
+            png_level=png_level,
+        ),
         turn_noise=turn_noise,
         distance_noise=distance_noise,
     )
