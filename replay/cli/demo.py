@@ -33,7 +33,7 @@ def demo(out_dir: Path, seed: int, omni: bool) -> None:
     from recorder.sim.scenario import builtin_scenario
     from recorder.sim.simulate import simulate_to_file
     from replay.cli.process import show_skips
-    from replay.cli.recording import run_recording
+    from replay.cli.recording import run_recording, viewer_command
     from replay.process import result_line
     from replay.records import MethodConfig
     from replay.rerun_out import save_rrd
@@ -66,4 +66,4 @@ def demo(out_dir: Path, seed: int, omni: bool) -> None:
     click.echo(f"  derived log    {derived}")
     click.echo(f"  summary        {summary}")
     click.echo(f"  Rerun          {rrd}")
-    click.echo(f"open the replay with:  rerun {rrd}")
+    click.echo(f"open the replay with:  {viewer_command()} {rrd}")

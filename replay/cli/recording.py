@@ -81,3 +81,18 @@ def run_recording(
             click.echo(f"{exc}; {os.fspath(out)} is finished and indexed", err=True)
             click.get_current_context().exit(128 + exc.signum)
     click.echo(f"wrote {os.fspath(out)}: {result.movements} movements, {result.frames} frames")
+
+
+def viewer_command() -> str:
+    """How to start the Rerun viewer from this environment.
+
+    ``rerun`` if it is on PATH, else the viewer installed beside this Python (a venv that is not
+    activated, as in the README's set-up).
+    """
+    import shutil
+    from pathlib import Path
+
+    if shutil.which("rerun"):
+        return "rerun"
+    beside = Path(sys.executable).parent / "rerun"
+    return str(beside) if beside.exists() else "rerun"

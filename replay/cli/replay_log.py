@@ -38,6 +38,7 @@ def replay(
 
     Without a target option it saves LOG's name with .rrd in the current folder.
     """
+    from replay.cli.recording import viewer_command
     from replay.logs import ProcessableLog
     from replay.process import result_line
     from replay.records import MethodConfig
@@ -65,7 +66,7 @@ def replay(
                 rec.disconnect()
     click.echo(f"{log}: {result_line(doc)}")
     if save:
-        click.echo(f"wrote {save}; open it with: rerun {save}")
+        click.echo(f"wrote {save}; open it with: {viewer_command()} {save}")
     if serve:
         import rerun as rr
 
