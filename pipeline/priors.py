@@ -260,8 +260,37 @@ def _gauss_ray_sample(
     return np.column_stack((origin[0] + along * c - across * s, origin[1] + along * s + across * c))
 
 
+class _GaussiansOnRay:
+    """Density, sampling and angular window of equally shaped Gaussians laid along the ray.
+
+    Subclasses give ``_params()``: per term, the range of its mean, its range std, its cross std
+    and its weight (the baselines of Fig. 1: one term, or a Solà-style series).
+    """
+
+    def _params(
+        self,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        raise NotImplementedError
+
+    def density(
+        self, points: NDArray[np.float64], origin: NDArray[np.float64], bearing_rad: float
+    ) -> NDArray[np.float64]:
+        """Density per unit area at points (n, 2) -> (n,)."""
+        return _gauss_ray_density(points, origin, bearing_rad, *self._params())
+
+    def sample(
+        self, n: int, origin: NDArray[np.float64], bearing_rad: float, rng: np.random.Generator
+    ) -> NDArray[np.float64]:
+        """Points (n, 2) drawn from the density."""
+        return _gauss_ray_sample(n, origin, bearing_rad, *self._params(), rng)
+
+    def angle_window(self, bearing_rad: float) -> tuple[float, float]:
+        """The whole circle (the first term covers the origin)."""
+        return bearing_rad - math.pi, bearing_rad + math.pi
+
+
 @dataclass(frozen=True)
-class GaussianPrior:
+class GaussianPrior(_GaussiansOnRay):
     """Baseline: one Gaussian on the ray (range std (r_max - r_min)/4, centred mid-range)."""
 
     eps_rad: float
@@ -283,25 +312,9 @@ class GaussianPrior:
             np.array([1.0]),
         )
 
-    def density(
-        self, points: NDArray[np.float64], origin: NDArray[np.float64], bearing_rad: float
-    ) -> NDArray[np.float64]:
-        """Gaussian density per unit area at points (n, 2) -> (n,)."""
-        return _gauss_ray_density(points, origin, bearing_rad, *self._params())
-
-    def sample(
-        self, n: int, origin: NDArray[np.float64], bearing_rad: float, rng: np.random.Generator
-    ) -> NDArray[np.float64]:
-        """Points (n, 2) from the Gaussian."""
-        return _gauss_ray_sample(n, origin, bearing_rad, *self._params(), rng)
-
-    def angle_window(self, bearing_rad: float) -> tuple[float, float]:
-        """The whole circle (the Gaussian covers the origin)."""
-        return bearing_rad - math.pi, bearing_rad + math.pi
-
 
 @dataclass(frozen=True)
-class MixturePrior:
+class MixturePrior(_GaussiansOnRay):
     """Baseline: Solà-style geometric series of equally weighted Gaussians along the ray."""
 
     eps_rad: float
@@ -328,22 +341,6 @@ class MixturePrior:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         s = self.means()
         return s, self.alpha * s, self.sigma_frac * self.eps_rad * s, np.full(s.size, 1.0 / s.size)
-
-    def density(
-        self, points: NDArray[np.float64], origin: NDArray[np.float64], bearing_rad: float
-    ) -> NDArray[np.float64]:
-        """Mixture density per unit area at points (n, 2) -> (n,)."""
-        return _gauss_ray_density(points, origin, bearing_rad, *self._params())
-
-    def sample(
-        self, n: int, origin: NDArray[np.float64], bearing_rad: float, rng: np.random.Generator
-    ) -> NDArray[np.float64]:
-        """Points (n, 2) from the mixture."""
-        return _gauss_ray_sample(n, origin, bearing_rad, *self._params(), rng)
-
-    def angle_window(self, bearing_rad: float) -> tuple[float, float]:
-        """The whole circle (the first terms cover the origin)."""
-        return bearing_rad - math.pi, bearing_rad + math.pi
 
 
 def make_prior(
