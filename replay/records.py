@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from data_schemas.errors import EstimationError
 from data_schemas.session import Session
+from pipeline.bearings import Detection
 from pipeline.priors import PriorName
 from replay.truth import Truth
 
@@ -62,20 +63,6 @@ class MethodConfig:
 
 
 @dataclass(frozen=True)
-class DetectionRecord:
-    """One landmark in one frame (mirrors ``pipeline.bearings.Detection``)."""
-
-    name: str
-    visible: bool
-    bearing_rad: float | None
-    width_rad: float
-    confidence: float
-    n_pixels: int
-    n_blobs: int
-    reason: str | None
-
-
-@dataclass(frozen=True)
 class FrameRecord:
     """Bearings of one decoded frame.
 
@@ -87,7 +74,7 @@ class FrameRecord:
         When the recorder wrote it.
     keyframe : (index, phase) or None
         The movement keyframe this frame is, if any.
-    detections : dict name -> DetectionRecord
+    detections : dict name -> Detection
         Every catalog landmark, in catalog order.
     image_bgr : (H, W, 3) uint8 or None
         The decoded frame, kept only when a sink asked for images.
@@ -101,7 +88,7 @@ class FrameRecord:
     timestamp_ns: int
     log_time_ns: int
     keyframe: tuple[int, str] | None
-    detections: Mapping[str, DetectionRecord]
+    detections: Mapping[str, Detection]
     image_bgr: NDArray[np.uint8] | None = None
     masks: Mapping[str, NDArray[np.bool_]] | None = None
     png: bytes | None = None

@@ -29,7 +29,6 @@ from pipeline.slam import BearingSlam, MovementObservation, MovementResult
 from replay.logs import ProcessableLog
 from replay.plan import MovementPlan, read_plan
 from replay.records import (
-    DetectionRecord,
     EstimateRecord,
     FrameRecord,
     MethodConfig,
@@ -73,20 +72,6 @@ def decode_image(msg: dict[str, Any]) -> tuple[NDArray[np.uint8], bytes | None]:
     return image, None
 
 
-def _detection_record(d: Detection) -> DetectionRecord:
-    bearing = None if d.bearing_rad is None else float(d.bearing_rad)
-    return DetectionRecord(
-        d.name,
-        bool(d.visible),
-        bearing,
-        float(d.width_rad),
-        float(d.confidence),
-        int(d.n_pixels),
-        int(d.n_blobs),
-        d.reason,
-    )
-
-
 def _estimate_record(
     mean: NDArray[np.float64], cov: NDArray[np.float64], ellipse: Any
 ) -> EstimateRecord:
@@ -100,7 +85,7 @@ def _estimate_record(
 class _Keyframe:
     timestamp_ns: int
     log_time_ns: int
-    detections: dict[str, DetectionRecord]
+    detections: dict[str, Detection]
 
 
 @dataclass
@@ -174,7 +159,7 @@ class Runner:
             found, masks = self.extractor.extract_with_masks(image)
         else:
             found, masks = self.extractor.extract(image), None
-        detections = {k: _detection_record(d) for k, d in found.items()}
+        detections = found
         frame = FrameRecord(
             timestamp_ns=t_ns,
             log_time_ns=log_time_ns,
