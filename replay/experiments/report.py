@@ -242,14 +242,7 @@ def write_report(results: Results, out_dir: Path, figures: dict[str, str]) -> Pa
     lines += ["", "## Methods on the same bearings", "", table_markdown(results), ""]
     for caption, name in figures.items():
         lines += [f"### {caption}", "", f"![{caption}]({name})", ""]
-    failed = results.failed()
-    if failed:
-        lines += ["## Failed runs", ""]
-        lines += [f"- {r.group} run {r.run} (seed {r.seed}): {r.status}" for r in failed]
-        lines.append("")
-    path = out_dir / "report.md"
-    path.write_text("\n".join(lines), encoding="utf-8")
-    return path
+    return _write_report(lines, results, out_dir)
 
 
 def write_sweep_report(results: Results, out_dir: Path, figure: str) -> Path:
@@ -274,6 +267,11 @@ def write_sweep_report(results: Results, out_dir: Path, figure: str) -> Path:
     for value in cfg["values"]:
         group = f"{cfg['param']}={value}"
         lines += [f"## {group}", "", table_markdown(results, group=group), ""]
+    return _write_report(lines, results, out_dir)
+
+
+def _write_report(lines: list[str], results: Results, out_dir: Path) -> Path:
+    """Append the failed runs (if any) to ``lines`` and write them as ``out_dir/report.md``."""
     failed = results.failed()
     if failed:
         lines += ["## Failed runs", ""]
