@@ -1,8 +1,9 @@
 """Camera frames as ``/camera/panorama`` messages: lossless PNG or raw ``bgr8``.
 
-The image bytes are returned as a bytes-like ``data`` field: :class:`recorder.writer.LogWriter`
-base64-encodes it straight into the JSON record (the Foxglove JSON form of ``bytes``), so the
-multi-megabyte base64 text is never built as a Python string. Encoding trade-off:
+The image bytes are returned as a bytes-like ``data`` field:
+:class:`data_schemas.mcap.writer.LogWriter` base64-encodes it straight into the JSON record (the
+Foxglove JSON form of ``bytes``), so the multi-megabyte base64 text is never built as a Python
+string. Encoding trade-off:
 
 * ``png`` (``foxglove.CompressedImage``): :func:`recorder.png.encode_png`; level 1 stores about
   half the raw size and costs most of the recorder's time per frame;

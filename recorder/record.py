@@ -32,6 +32,7 @@ from typing import Any
 
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import BslamError, LogError
+from data_schemas.mcap.writer import LogWriter
 from data_schemas.stamps import stamp_from_ns
 from recorder.camera import Camera
 from recorder.clock import Clock
@@ -39,7 +40,6 @@ from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message
 from recorder.moves import Move
 from recorder.png import check_level
 from recorder.robot import Robot, drive, turn
-from recorder.writer import LogWriter
 
 #: ``foxglove.Log`` levels.
 INFO, WARNING, ERROR = 2, 3, 4

@@ -13,8 +13,8 @@ from typing import Any, Literal
 from data_schemas.calibration import Calibration, calibration_from_dict
 from data_schemas.codec import validate
 from data_schemas.errors import BslamError, CalibrationError, SchemaError
+from data_schemas.mcap.writer import software_version
 from data_schemas.session import SCHEMA_VERSION, LandmarkSpec, session_from_doc
-from recorder.writer import software_version
 
 
 def landmark_entry(spec: LandmarkSpec) -> dict[str, Any]:

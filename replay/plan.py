@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.stamps import ns_from_stamp
-from replay.logs import ProcessableLog
 
 MOVEMENT_TOPIC = "/robot/movement"
 TRUTH_TOPIC = "/sim/ground_truth"

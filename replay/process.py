@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import LogError
-from replay.logs import ProcessableLog
+from data_schemas.mcap.processable import ProcessableLog
 from replay.records import MethodConfig, Sink
 from replay.sinks.summary import SummarySink
 from replay.stages import run_log

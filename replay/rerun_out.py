@@ -10,8 +10,8 @@ from typing import Any, Literal
 import rerun as rr
 
 from data_schemas.errors import BslamError
+from data_schemas.mcap.processable import ProcessableLog
 from replay.blueprint import method_blueprint
-from replay.logs import ProcessableLog
 from replay.process import process_log
 from replay.records import PRIORS, MethodConfig
 from replay.sinks.rerun_sink import RerunSink

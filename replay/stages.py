@@ -22,11 +22,11 @@ import pybase64
 from numpy.typing import NDArray
 
 from data_schemas.errors import ImageError
+from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.session import Session
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import BearingExtractor, Detection, decode_frame
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
-from replay.logs import ProcessableLog
 from replay.plan import MovementPlan, read_plan
 from replay.records import (
     EstimateRecord,

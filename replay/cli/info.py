@@ -17,9 +17,9 @@ def info(log: str) -> None:
     import json
 
     from data_schemas.errors import BslamError, UnfinishedLogError
+    from data_schemas.mcap.read import log_summary
     from data_schemas.registry import SESSION_METADATA_NAME
     from data_schemas.session import session_from_metadata
-    from recorder.logread import log_summary
 
     s = log_summary(log)
 

@@ -10,7 +10,7 @@ import click
 @click.argument("fixed", type=click.Path(dir_okay=False))
 def recover(broken: str, fixed: str) -> None:
     """Rewrite every complete chunk of BROKEN (an interrupted log) into a new indexed FIXED."""
-    from recorder.logread import recover_log
+    from data_schemas.mcap.read import recover_log
 
     report = recover_log(broken, fixed)
     note = " (it was already finished)" if report.was_finished else ""

@@ -38,8 +38,8 @@ def replay(
 
     Without a target option it saves LOG's name with .rrd in the current folder.
     """
+    from data_schemas.mcap.processable import ProcessableLog
     from replay.cli.recording import viewer_command
-    from replay.logs import ProcessableLog
     from replay.process import result_line
     from replay.records import MethodConfig
     from replay.rerun_out import RerunTarget, open_recording, replay_log

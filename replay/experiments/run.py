@@ -126,7 +126,7 @@ def simulate(scenario: dict[str, Any], log: Path, *, seed: int) -> None:
 
 def true_keyframes(log: Path) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
     """True (O1, O2) positions (m, world) of every complete movement of a simulated log."""
-    from replay.logs import ProcessableLog
+    from data_schemas.mcap.processable import ProcessableLog
     from replay.plan import read_plan
 
     with ProcessableLog(log) as opened:

@@ -1,6 +1,6 @@
 """The derived-log sink: the stages' outputs as MCAP channels (logs in, logs out).
 
-Written with the recorder's crash-safe :class:`~recorder.writer.LogWriter`: the session
+Written with the recorder's crash-safe :class:`~data_schemas.mcap.writer.LogWriter`: the session
 metadata of the source log comes first (with a ``derived`` block naming the source and the
 method), then ``/pipeline/bearings`` per processed frame and ``/pipeline/particles_fr``,
 ``/pipeline/particles_fl``, ``/pipeline/estimate`` per movement, each at the ``log_time`` of the
@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.mcap.writer import LogWriter
 from data_schemas.stamps import stamp_from_ns
-from recorder.writer import LogWriter
 from replay.records import FrameRecord, MovementRecord, RunInfo
 
 

@@ -31,13 +31,13 @@ import pybase64
 import pytest
 
 from data_schemas.calibration import UnwrappedCalibration
+from data_schemas.mcap.writer import LogWriter
 from data_schemas.session import LandmarkSpec
 from recorder.clock import SystemClock
 from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message
 from recorder.png import encode_png
 from recorder.session import build_session_doc
 from recorder.timebase import EpochClock
-from recorder.writer import LogWriter
 
 SIZES = {"176x255": (176, 255), "1920x960": (960, 1920)}
 CASES = {"png0": ("png", 0), "png1": ("png", 1), "bgr8": ("bgr8", 0)}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from recorder.logread import LogReader
+from data_schemas.mcap.read import LogReader
 from recorder.record import RecordSettings
 from recorder.sim.scenario import builtin_scenario, scenario_from_dict
 from recorder.sim.simulate import SimSettings, simulate_to_file

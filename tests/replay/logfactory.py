@@ -1,8 +1,8 @@
 """Hand-made bearing-slam logs for replay tests (bad inputs, edge cases, fast unit runs).
 
 Frames are unwrapped panoramas painted with a vertical bar per landmark at its true bearing,
-written with the recorder's real :class:`~recorder.writer.LogWriter`. The end-to-end tests use
-the real simulator (``bslam simulate``); this factory makes the odd logs it would never write.
+written with the real :class:`~data_schemas.mcap.writer.LogWriter`. The end-to-end tests use the
+real simulator (``bslam simulate``); this factory makes the odd logs it would never write.
 """
 
 from __future__ import annotations
@@ -18,12 +18,12 @@ import numpy as np
 
 from data_schemas.calibration import UnwrappedCalibration
 from data_schemas.colors import NOMINAL_BGR
+from data_schemas.mcap.writer import LogWriter
 from data_schemas.session import LandmarkSpec
 from data_schemas.stamps import stamp_from_ns
 from recorder.clock import VirtualClock
 from recorder.session import build_session_doc
 from recorder.timebase import EpochClock
-from recorder.writer import LogWriter
 
 LANDMARKS = {
     "L1": (0.375, 0.55, "red"),

@@ -11,7 +11,7 @@ from logfactory import session_doc, write_log
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from recorder.mcapout import MESSAGE_HEADER
+from data_schemas.mcap.chunks import MESSAGE_HEADER
 from replay.cli import cli
 
 

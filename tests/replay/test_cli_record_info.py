@@ -11,12 +11,12 @@ import pytest
 from click.testing import CliRunner
 
 from data_schemas.codec import validate
+from data_schemas.mcap.read import LogReader, log_summary
+from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import TOPICS
 from recorder.clock import SystemClock, VirtualClock
-from recorder.logread import LogReader, log_summary
 from recorder.sim.fake_khepera import FakeKhepera
 from recorder.timebase import EpochClock
-from recorder.writer import LogWriter
 from replay.cli import cli
 from tests.recorder.samples import make_session_doc, sample_messages
 

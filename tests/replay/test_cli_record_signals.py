@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from data_schemas.codec import validate
+from data_schemas.mcap.read import LogReader, log_summary, recover_log
 from data_schemas.registry import TOPICS
 from recorder.clock import SystemClock
-from recorder.logread import LogReader, log_summary, recover_log
 from recorder.sim.fake_khepera import FakeKhepera
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -16,9 +16,9 @@ from click.testing import CliRunner
 from data_schemas.angles import wrap_rad
 from data_schemas.codec import validate
 from data_schemas.colors import NOMINAL_BGR
+from data_schemas.mcap.read import LogReader
 from data_schemas.registry import TOPICS
 from data_schemas.stamps import ns_from_stamp
-from recorder.logread import LogReader
 from replay.cli import cli
 
 

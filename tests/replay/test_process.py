@@ -17,7 +17,7 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from data_schemas.codec import validate_message
-from recorder.logindex import LogIndex
+from data_schemas.mcap.index import LogIndex
 from replay.batch import LogJob, expand_logs, plan_jobs, process_job
 from replay.cli import cli
 from replay.parallel import SchedulerError, run_tasks

@@ -13,13 +13,13 @@ closes itself, so that every byte it has accepted reaches the operating system s
   chunk at once, so a power cut loses no more than a kill, while the recorder goes on encoding
   the next frame (``fsync`` of megabytes takes milliseconds);
 * :meth:`LogWriter.finish` writes the summary and footer (an indexed file). An unfinished file
-  is still readable chunk by chunk (:mod:`recorder.logread`) and ``bslam recover`` indexes it.
+  is still readable chunk by chunk (:mod:`data_schemas.mcap.read`) and ``bslam recover`` indexes it.
 
 If the disk fills up (``ENOSPC``, ``EDQUOT``, or ``EFBIG`` from ``RLIMIT_FSIZE``) the writer
 cuts the file back to the end of the last complete chunk, stops, and raises
 :class:`~data_schemas.errors.DiskFullError`.
 
-Speed: the MCAP records are assembled by :class:`recorder.mcapout.McapChunkWriter` without
+Speed: the MCAP records are assembled by :class:`data_schemas.mcap.chunks.McapChunkWriter` without
 intermediate copies, and a field that the schema declares ``contentEncoding: base64`` (image
 ``data``) may be given as bytes: it is base64-encoded with SIMD (``pybase64``) straight into
 the record, never built as a Python string or scanned by ``json.dumps``.
@@ -36,12 +36,13 @@ import time
 from functools import cache
 from importlib.metadata import PackageNotFoundError, version
 from types import TracebackType
-from typing import IO, Any
+from typing import IO, Any, Protocol
 
 import pybase64
 
 from data_schemas.codec import validate
 from data_schemas.errors import DiskFullError, LogError, SchemaError
+from data_schemas.mcap.chunks import Bytes, McapChunkWriter
 from data_schemas.registry import (
     IMAGE_SCHEMAS,
     MESSAGE_ENCODING,
@@ -53,11 +54,17 @@ from data_schemas.registry import (
 )
 from data_schemas.session import session_from_doc
 from data_schemas.stamps import ns_from_stamp
-from recorder.clock import Clock
-from recorder.mcapout import Bytes, McapChunkWriter
 
 #: errno values that mean "no room left for this file".
 _FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EFBIG, errno.EDQUOT})
+
+
+class MonotonicClock(Protocol):
+    """What the writer needs of a clock (``recorder.clock.Clock`` is one)."""
+
+    def monotonic_ns(self) -> int:
+        """Time for ``log_time``, integer ns."""
+        ...
 
 
 def software_version() -> str:
@@ -77,7 +84,7 @@ class LogWriter:
         Where to write. A path is opened (and closed) by the writer; a stream is left open.
     session_doc : dict
         The session document (``bslam.Session``); validated before anything is written.
-    clock : Clock
+    clock : MonotonicClock
         Time source; ``log_time`` of each message is ``clock.monotonic_ns()`` when written
         (use :class:`recorder.timebase.EpochClock` so that it reads as a date).
     chunk_bytes : int
@@ -99,7 +106,7 @@ class LogWriter:
         output: str | os.PathLike[str] | IO[bytes],
         session_doc: dict[str, Any],
         *,
-        clock: Clock,
+        clock: MonotonicClock,
         chunk_bytes: int = 4 * 1024 * 1024,
         chunk_seconds: float = 0.5,
         fsync: bool = True,

@@ -20,7 +20,12 @@ from mcap.opcode import Opcode
 from mcap.records import Message
 from mcap.summary import Summary
 
-from recorder.mcapout import MESSAGE_FIELDS, MESSAGE_HEADER, RECORD_HEADER, STORED_CHUNK_HEADER
+from data_schemas.mcap.chunks import (
+    MESSAGE_FIELDS,
+    MESSAGE_HEADER,
+    RECORD_HEADER,
+    STORED_CHUNK_HEADER,
+)
 
 #: Message index body up to its entries: channel id, entries length in bytes.
 _INDEX_FIELDS = struct.Struct("<HI")

@@ -10,8 +10,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 
-from recorder.logindex import DamagedLogError, LogIndex
-from recorder.mcapout import MESSAGE_HEADER, McapChunkWriter
+from data_schemas.mcap.chunks import MESSAGE_HEADER, McapChunkWriter
+from data_schemas.mcap.index import DamagedLogError, LogIndex
 
 
 def _recorded(seed: int = 3) -> bytes:

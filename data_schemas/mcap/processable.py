@@ -1,8 +1,8 @@
 """Open a finished bearing-slam log for processing: checks first, then messages in log-time order.
 
-Built on :class:`recorder.logread.LogReader` (which recognises a file that is not MCAP or is
+Built on :class:`data_schemas.mcap.read.LogReader` (which recognises a file that is not MCAP or is
 unfinished) and the log's indexes (channels, time ranges, log-time order): messages are read in
-place through :class:`recorder.logindex.LogIndex` when the chunks are stored (the recorder's
+place through :class:`data_schemas.mcap.index.LogIndex` when the chunks are stored (the recorder's
 logs), by mcap's reader otherwise. Every problem a user can cause is one line: not MCAP,
 unfinished (``bslam recover``), no session metadata, no camera calibration, a channel with a
 schema this version does not know, a damaged log.
@@ -22,10 +22,10 @@ from mcap.reader import McapReader, make_reader
 from mcap.records import Message
 
 from data_schemas.errors import LogError, MissingMetadataError, UnknownSchemaError
+from data_schemas.mcap.index import LogIndex
+from data_schemas.mcap.read import LogMessage, LogReader
 from data_schemas.registry import IMAGE_SCHEMAS, SESSION_METADATA_NAME, TOPICS, schema_dict
 from data_schemas.session import Session, session_from_metadata
-from recorder.logindex import LogIndex
-from recorder.logread import LogMessage, LogReader
 
 
 def _check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:

@@ -10,7 +10,7 @@ footer) are serialised by mcap's record classes, so the file is plain MCAP: sche
 channels inside the chunk of their first message, message indexes after each chunk, and a
 full summary (schemas, channels, statistics, chunk and metadata indexes, summary offsets).
 
-This class knows nothing of time, locking or errors: :class:`recorder.writer.LogWriter`
+This class knows nothing of time, locking or errors: :class:`data_schemas.mcap.writer.LogWriter`
 decides when chunks close and handles failures.
 """
 

@@ -10,11 +10,11 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from data_schemas.errors import LogError, MissingMetadataError, NotMcapError, UnfinishedLogError
+from data_schemas.mcap.read import LogReader, log_summary, recover_log
+from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import SESSION_METADATA_NAME
 from recorder.clock import VirtualClock
-from recorder.logread import LogReader, log_summary, recover_log
 from recorder.timebase import EpochClock
-from recorder.writer import LogWriter
 from tests.recorder.samples import make_session_doc, sample_messages
 
 

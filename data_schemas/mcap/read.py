@@ -30,9 +30,9 @@ from data_schemas.errors import (
     NotMcapError,
     UnfinishedLogError,
 )
+from data_schemas.mcap.chunks import MAGIC, RECORD_HEADER, McapChunkWriter
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
-from recorder.mcapout import MAGIC, RECORD_HEADER, McapChunkWriter
 
 Source = str | os.PathLike[str] | IO[bytes]
 #: Chunk size of a recovered log.
