@@ -37,6 +37,10 @@ class UnfinishedLogError(LogError):
     """The MCAP file was not finished (no summary/footer); ``bslam recover`` can rewrite it."""
 
 
+class CorruptLogError(LogError):
+    """A log's bytes are damaged (a chunk fails its CRC, an index disagrees, records unreadable)."""
+
+
 class MissingMetadataError(LogError):
     """The log lacks the session metadata (or a required part of it, such as calibration)."""
 
@@ -47,6 +51,10 @@ class UnknownSchemaError(LogError):
 
 class DiskFullError(LogError):
     """The disk (or the file size limit) is full; the log is readable up to the last chunk."""
+
+
+class OutputError(BslamError):
+    """An output path may not be written: it is an input, exists, or cannot be created."""
 
 
 class DeviceError(BslamError):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,6 +59,14 @@ class Session:
         """The simulation scenario, for simulated sessions."""
         scenario: dict[str, Any] | None = self.doc.get("scenario")
         return scenario
+
+    @property
+    def session_id(self) -> str:
+        """The session's unique id (logs older than the field: a hash of the document)."""
+        given = self.doc.get("session_id")
+        if isinstance(given, str) and given:
+            return given
+        return uuid.uuid5(uuid.NAMESPACE_OID, self.to_json()).hex
 
     def landmark_names(self) -> list[str]:
         """Catalog names in order."""

@@ -63,12 +63,15 @@ class RecordSettings:
         PNG level 0..3 (see :mod:`recorder.png`; ignored for ``bgr8``).
     poll_s : float
         Motion-status polling period, seconds (also the signal-check period).
+    chunk_compression : {"", "zstd"}
+        Log chunk compression (``--chunk-compression``; see :class:`LogWriter`).
     """
 
     frame_rate_hz: float = 5.0
     encoding: Encoding = "png"
     png_level: int = 1
     poll_s: float = 0.05
+    chunk_compression: str = ""
 
     def __post_init__(self) -> None:
         if not self.frame_rate_hz > 0:
@@ -369,5 +372,10 @@ def record_to_file(
     (:func:`recorder.session.build_session_doc`); the other arguments are those of
     :func:`record_session`.
     """
-    with stop_on_signals(), LogWriter(out, session_doc, clock=rig.clock) as writer:
+    with (
+        stop_on_signals(),
+        LogWriter(
+            out, session_doc, clock=rig.clock, compression=settings.chunk_compression
+        ) as writer,
+    ):
         return record_session(rig, writer, moves, settings, progress=progress)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -76,6 +77,7 @@ def build_session_doc(
         "schema_version": SCHEMA_VERSION,
         "software_version": software_version(),
         "created_unix_ns": int(created_unix_ns),
+        "session_id": uuid.uuid4().hex,
         "simulated": scenario is not None,
         "robot": dict(robot),
         "camera": {

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import LogError
+from data_schemas.outputs import OutputGuard
 from replay.records import MethodConfig
 
 DERIVED_SUFFIX = ".derived.mcap"
@@ -32,6 +33,8 @@ class LogJob:
     out: Path | None
     summary: Path | None
     method: MethodConfig
+    force: bool = False
+    skip_corrupt: bool = False
 
 
 def expand_logs(args: Sequence[str]) -> list[Path]:
@@ -62,29 +65,55 @@ def expand_logs(args: Sequence[str]) -> list[Path]:
 
 
 def plan_jobs(
-    logs: Sequence[Path], out: Path | None, summary: Path | None, method: MethodConfig
+    logs: Sequence[Path],
+    out: Path | None,
+    summary: Path | None,
+    method: MethodConfig,
+    *,
+    force: bool = False,
+    skip_corrupt: bool = False,
 ) -> list[LogJob]:
-    """One job per log. One log: ``out``/``summary`` are files; many: folders (created)."""
+    """One job per log. One log: ``out``/``summary`` are files; many: folders (created).
+
+    Every output is checked before any job runs (:class:`data_schemas.outputs.OutputGuard`):
+    none may be a log, exist (without ``force``), or be shared by two logs.
+    """
     if len(logs) == 1:
-        return [LogJob(logs[0], out, summary, method)]
-    for folder in (out, summary):
-        if folder is not None:
-            if folder.exists() and not folder.is_dir():
-                raise NoLogsError(f"{folder}: with many logs, --out and --summary are folders")
-            folder.mkdir(parents=True, exist_ok=True)
-    return [
-        LogJob(
-            log,
-            None if out is None else out / (log.stem + DERIVED_SUFFIX),
-            None if summary is None else summary / (log.stem + SUMMARY_SUFFIX),
-            method,
-        )
-        for log in logs
-    ]
+        jobs = [LogJob(logs[0], out, summary, method, force, skip_corrupt)]
+    else:
+        for folder in (out, summary):
+            if folder is not None:
+                if folder.exists() and not folder.is_dir():
+                    raise NoLogsError(f"{folder}: with many logs, --out and --summary are folders")
+                folder.mkdir(parents=True, exist_ok=True)
+        jobs = [
+            LogJob(
+                log,
+                None if out is None else out / (log.stem + DERIVED_SUFFIX),
+                None if summary is None else summary / (log.stem + SUMMARY_SUFFIX),
+                method,
+                force,
+                skip_corrupt,
+            )
+            for log in logs
+        ]
+    guard = OutputGuard(logs, force=force)
+    for job in jobs:
+        for path, what in ((job.out, "derived log"), (job.summary, "summary")):
+            if path is not None:
+                guard.claim(path, what=f"{what} of {job.log}")
+    return jobs
 
 
 def process_job(job: LogJob) -> dict[str, Any]:
     """Process one log; return its summary document (a module-level function, for pools)."""
     from replay.process import process_log
 
-    return process_log(job.log, job.method, out=job.out, summary=job.summary)
+    return process_log(
+        job.log,
+        job.method,
+        out=job.out,
+        summary=job.summary,
+        force=job.force,
+        skip_corrupt=job.skip_corrupt,
+    )

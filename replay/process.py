@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import os
 import re
 from pathlib import Path
 from typing import Any
 
-from data_schemas.errors import LogError
 from data_schemas.mcap.processable import ProcessableLog
+from data_schemas.outputs import OutputGuard
 from replay.records import MethodConfig, Sink
 from replay.sinks.summary import SummarySink
 from replay.stages import run_log
 
+_LOG = logging.getLogger("bslam.logs")
 _FLAT_LIST = re.compile(r"\[\s+([^\[\]{}]*?)\s+\]")
 
 
@@ -24,12 +27,21 @@ def dumps(doc: dict[str, Any]) -> str:
     )
 
 
-def write_json(path: str | os.PathLike[str], doc: dict[str, Any]) -> None:
-    """Write a JSON document (indented, trailing newline); one-line error if it cannot."""
-    try:
-        Path(path).write_text(dumps(doc) + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise LogError(f"cannot write {os.fspath(path)}: {exc.strerror}") from None
+def write_json(
+    path: str | os.PathLike[str], doc: dict[str, Any], guard: OutputGuard | None = None
+) -> None:
+    """Write a JSON document (indented, trailing newline) whole, through a temporary file."""
+    (guard or OutputGuard(force=True)).write_text(path, dumps(doc) + "\n")
+
+
+def open_log(log: str | os.PathLike[str], *, skip_corrupt: bool = False) -> ProcessableLog:
+    """Open a log to process; warn (``bslam`` logger) about what it ignores or skips."""
+    opened = ProcessableLog(log, skip_corrupt=skip_corrupt)
+    for note in opened.notes:
+        _LOG.warning(note)
+    for damage in opened.skipped:
+        _LOG.warning(f"{opened.name}: skipped {damage.describe(salvaged=False)}")
+    return opened
 
 
 def process_log(
@@ -39,6 +51,8 @@ def process_log(
     out: str | os.PathLike[str] | None = None,
     summary: str | os.PathLike[str] | None = None,
     extra_sinks: tuple[Sink, ...] = (),
+    force: bool = False,
+    skip_corrupt: bool = False,
 ) -> dict[str, Any]:
     """Process one log; return its summary document.
 
@@ -54,19 +68,37 @@ def process_log(
         Write the summary JSON here.
     extra_sinks : tuple of Sink
         More sinks fed by the same pass (e.g. a Rerun sink).
+    force : bool
+        Replace existing outputs (never the log itself).
+    skip_corrupt : bool
+        Process a corrupt log without its damaged chunks (warned about) instead of refusing it.
+
+    Raises
+    ------
+    OutputError
+        An output is the log (or a link to it), exists without ``force``, or cannot be written;
+        checked before anything is read.
     """
+    source = log.path if isinstance(log, ProcessableLog) else Path(log)
+    guard = OutputGuard([source], force=force)
+    for path, what in ((out, "derived log"), (summary, "summary")):
+        if path is not None:
+            guard.claim(path, what=what)
     summary_sink = SummarySink()
     sinks: list[Sink] = [summary_sink, *extra_sinks]
-    if out is not None:
-        from replay.sinks.derived import DerivedLogSink  # the MCAP writer only when asked
+    with contextlib.ExitStack() as stack:
+        opened = (
+            log
+            if isinstance(log, ProcessableLog)
+            else stack.enter_context(open_log(log, skip_corrupt=skip_corrupt))
+        )
+        if out is not None:
+            from replay.sinks.derived import DerivedLogSink  # the MCAP writer only when asked
 
-        source = log.path if isinstance(log, ProcessableLog) else Path(log)
-        if Path(out).resolve() == source.resolve():
-            raise LogError(f"{log}: --out would overwrite the source log; choose another path")
-        sinks.append(DerivedLogSink(out))
-    run_log(log, method, sinks)
+            sinks.append(DerivedLogSink(stack.enter_context(guard.staged(out))))
+        run_log(opened, method, sinks)
     if summary is not None:
-        write_json(summary, summary_sink.document)
+        write_json(summary, summary_sink.document, guard)
     return summary_sink.document
 
 

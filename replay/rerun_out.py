@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal
 
 import rerun as rr
 
 from data_schemas.errors import BslamError
 from data_schemas.mcap.processable import ProcessableLog
+from data_schemas.outputs import OutputGuard
 from replay.blueprint import method_blueprint
-from replay.process import process_log
+from replay.process import open_log, process_log
 from replay.records import PRIORS, MethodConfig
 from replay.sinks.rerun_sink import RerunSink
 
@@ -51,6 +51,11 @@ def open_recording(name: str, target: RerunTarget) -> tuple[rr.RecordingStream, 
     return rec, url
 
 
+def recording_id(log: ProcessableLog) -> str:
+    """The Rerun recording id of a log: its session id, so two logs never merge in a viewer."""
+    return log.session.session_id
+
+
 def replay_log(
     log: str | os.PathLike[str] | ProcessableLog,
     method: MethodConfig,
@@ -59,22 +64,39 @@ def replay_log(
     images: bool = True,
     out: str | os.PathLike[str] | None = None,
     summary: str | os.PathLike[str] | None = None,
+    force: bool = False,
 ) -> dict[str, Any]:
     """Stream every stage of ``log`` to ``rec`` (and Fig. 1); return the summary document.
 
-    ``out`` and ``summary``, if given, also receive the derived log and the summary JSON.
+    ``out`` and ``summary``, if given, also receive the derived log and the summary JSON
+    (existing ones replaced only with ``force``).
     """
     sink = RerunSink(rec, images=images)
-    return process_log(log, method, out=out, summary=summary, extra_sinks=(sink,))
+    return process_log(log, method, out=out, summary=summary, extra_sinks=(sink,), force=force)
 
 
 def save_rrd(
-    log: str | os.PathLike[str], method: MethodConfig, rrd: str | os.PathLike[str], **kw: Any
+    log: str | os.PathLike[str],
+    method: MethodConfig,
+    rrd: str | os.PathLike[str],
+    *,
+    force: bool = False,
+    skip_corrupt: bool = False,
+    **kw: Any,
 ) -> dict[str, Any]:
-    """Replay ``log`` into the file ``rrd`` (finished and closed on return)."""
-    with ProcessableLog(log) as opened:  # a bad log fails here, before the .rrd exists
-        rec, _ = open_recording(Path(log).stem, RerunTarget("save", os.fspath(rrd)))
+    """Replay ``log`` into the file ``rrd`` (written whole, renamed into place on return).
+
+    Raises
+    ------
+    OutputError
+        ``rrd`` is the log (or a link to it), or exists without ``force``.
+    """
+    guard = OutputGuard([log], force=force)
+    guard.claim(rrd, what="Rerun recording")
+    # a bad log fails here, before any output exists
+    with open_log(log, skip_corrupt=skip_corrupt) as opened, guard.staged(rrd) as part:
+        rec, _ = open_recording(recording_id(opened), RerunTarget("save", os.fspath(part)))
         try:
-            return replay_log(opened, method, rec, **kw)
+            return replay_log(opened, method, rec, force=force, **kw)
         finally:
             rec.disconnect()

@@ -19,12 +19,14 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import IO
+from typing import IO, Any
 
 from isal import isal_zlib
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
+    Attachment,
+    AttachmentIndex,
     Channel,
     ChunkIndex,
     DataEnd,
@@ -39,17 +41,15 @@ from mcap.records import (
     SummaryOffset,
 )
 
-#: The bytes that open and close every MCAP file.
-MAGIC = bytes([137, 77, 67, 65, 80, 48, 13, 10])
-#: Every record starts with its opcode and the length of its body.
-RECORD_HEADER = struct.Struct("<BQ")
-#: Message record up to its data: opcode, length, channel id, sequence, log and publish time.
-MESSAGE_HEADER = struct.Struct("<BQHIQQ")
-MESSAGE_FIELDS = MESSAGE_HEADER.size - RECORD_HEADER.size
-#: Chunk record up to its records: start/end time, uncompressed size and CRC, compression
-#: (empty string: stored), records length; the records of a stored chunk follow it.
-STORED_CHUNK_HEADER = struct.Struct("<BQQQQIIQ")
-_FOOTER_PREFIX = struct.Struct("<BQQQ")
+from data_schemas.mcap.layout import (
+    CHUNK_FIELDS,
+    FOOTER_PREFIX,
+    MAGIC,
+    MESSAGE_FIELDS,
+    MESSAGE_HEADER,
+    RECORD_HEADER,
+    STORED_CHUNK_HEADER,
+)
 
 Bytes = bytes | bytearray | memoryview
 
@@ -84,6 +84,13 @@ class _OpenChunk:
         return offset
 
 
+def _zstd() -> Any:
+    """A zstd compressor (imported only when a log asks for compressed chunks)."""
+    import zstandard
+
+    return zstandard.ZstdCompressor(level=3)
+
+
 class McapChunkWriter:
     """Write an MCAP file chunk by chunk to a binary stream (see module docstring).
 
@@ -93,11 +100,18 @@ class McapChunkWriter:
         Written sequentially; ``tell()`` must give the file offset.
     library : str
         The header's library string.
+    compression : {"", "zstd"}
+        Chunk compression: ``""`` stores chunks (frames are compressed already, and stored
+        chunks can be read in place), ``"zstd"`` compresses each chunk.
     """
 
-    def __init__(self, stream: IO[bytes], *, library: str) -> None:
+    def __init__(self, stream: IO[bytes], *, library: str, compression: str = "") -> None:
+        if compression not in ("", "zstd"):
+            raise ValueError(f"chunk compression must be '' or 'zstd', got {compression!r}")
         self._stream = stream
         self._library = library
+        self._compression = compression
+        self._attachment_indexes: list[AttachmentIndex] = []
         self._chunk = _OpenChunk()
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
@@ -122,10 +136,31 @@ class McapChunkWriter:
         """Write the magic, the header and ``metadata`` records (name -> key/value map)."""
         self._stream.write(MAGIC + serialise(Header(profile="", library=self._library)))
         for name, values in metadata.items():
-            offset = self._stream.tell()
-            data = serialise(Metadata(name=name, metadata=values))
-            self._stream.write(data)
-            self._metadata_indexes.append(MetadataIndex(offset, len(data), name))
+            self.add_metadata(name, values)
+
+    def add_metadata(self, name: str, values: dict[str, str]) -> None:
+        """Write a metadata record now (between chunks: the open chunk is not written yet)."""
+        offset = self._stream.tell()
+        data = serialise(Metadata(name=name, metadata=values))
+        self._stream.write(data)
+        self._metadata_indexes.append(MetadataIndex(offset, len(data), name))
+
+    def add_attachment(self, attachment: Attachment) -> None:
+        """Write an attachment record now (between chunks), indexed in the summary."""
+        offset = self._stream.tell()
+        data = serialise(attachment)
+        self._stream.write(data)
+        self._attachment_indexes.append(
+            AttachmentIndex(
+                offset=offset,
+                length=len(data),
+                log_time=attachment.log_time,
+                create_time=attachment.create_time,
+                data_size=len(attachment.data),
+                name=attachment.name,
+                media_type=attachment.media_type,
+            )
+        )
 
     def add_schema(self, name: str, encoding: str, data: bytes) -> int:
         """Register a schema (written into the open chunk); return its id."""
@@ -197,17 +232,26 @@ class McapChunkWriter:
             self._start_ns = min(self._start_ns, chunk.start_ns)
             self._end_ns = max(self._end_ns, chunk.end_ns)
         chunk_offset = self._stream.tell()
-        head = STORED_CHUNK_HEADER.pack(
-            Opcode.CHUNK,
-            STORED_CHUNK_HEADER.size - RECORD_HEADER.size + chunk.size,
-            chunk.start_ns,
-            chunk.end_ns,
-            chunk.size,
-            chunk.crc,
-            0,  # compression "" (stored): frames are compressed already
-            chunk.size,
-        )
-        chunk_length = len(head) + chunk.size
+        if self._compression:
+            body = [_zstd().compress(b"".join(chunk.parts))]
+            stored = len(body[0])
+            name = self._compression.encode()
+            head = CHUNK_FIELDS.pack(chunk.start_ns, chunk.end_ns, chunk.size, chunk.crc)
+            head += struct.pack("<I", len(name)) + name + struct.pack("<Q", stored)
+            head = RECORD_HEADER.pack(Opcode.CHUNK, len(head) + stored) + head
+        else:
+            body, stored = chunk.parts, chunk.size
+            head = STORED_CHUNK_HEADER.pack(
+                Opcode.CHUNK,
+                STORED_CHUNK_HEADER.size - RECORD_HEADER.size + chunk.size,
+                chunk.start_ns,
+                chunk.end_ns,
+                chunk.size,
+                chunk.crc,
+                0,  # compression "" (stored): frames are compressed already
+                chunk.size,
+            )
+        chunk_length = len(head) + stored
         index_offsets: dict[int, int] = {}
         indexes: list[bytes] = []
         position = chunk_offset + chunk_length
@@ -215,7 +259,7 @@ class McapChunkWriter:
             index_offsets[channel_id] = position
             indexes.append(serialise(MessageIndex(channel_id, entries)))
             position += len(indexes[-1])
-        self._stream.write(b"".join([head, *chunk.parts, *indexes]))
+        self._stream.write(b"".join([head, *body, *indexes]))
         self._stream.flush()
         self._chunk_indexes.append(
             ChunkIndex(
@@ -225,8 +269,8 @@ class McapChunkWriter:
                 chunk_length=chunk_length,
                 message_index_offsets=index_offsets,
                 message_index_length=position - chunk_offset - chunk_length,
-                compression="",
-                compressed_size=chunk.size,
+                compression=self._compression,
+                compressed_size=stored,
                 uncompressed_size=chunk.size,
             )
         )
@@ -245,6 +289,7 @@ class McapChunkWriter:
             (Opcode.STATISTICS, [serialise(self._statistics())]),
             (Opcode.CHUNK_INDEX, [serialise(i) for i in self._chunk_indexes]),
             (Opcode.METADATA_INDEX, [serialise(i) for i in self._metadata_indexes]),
+            (Opcode.ATTACHMENT_INDEX, [serialise(i) for i in self._attachment_indexes]),
         ]
         parts: list[bytes] = []
         offsets: list[bytes] = []
@@ -257,7 +302,7 @@ class McapChunkWriter:
                 position += length
         summary_offset_start = position
         summary = b"".join(parts + offsets)
-        footer_prefix = _FOOTER_PREFIX.pack(Opcode.FOOTER, 20, summary_start, summary_offset_start)
+        footer_prefix = FOOTER_PREFIX.pack(Opcode.FOOTER, 20, summary_start, summary_offset_start)
         crc = isal_zlib.crc32(footer_prefix, isal_zlib.crc32(summary))
         footer = serialise(Footer(summary_start, summary_offset_start, crc))
         self._stream.write(summary + footer + MAGIC)
@@ -265,7 +310,7 @@ class McapChunkWriter:
 
     def _statistics(self) -> Statistics:
         return Statistics(
-            attachment_count=0,
+            attachment_count=len(self._attachment_indexes),
             channel_count=len(self._channels),
             channel_message_counts=dict(self._counts),
             chunk_count=len(self._chunk_indexes),

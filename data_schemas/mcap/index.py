@@ -11,26 +11,24 @@ its data, and nothing else of the chunk. :class:`LogIndex` does that, in mcap's 
 
 from __future__ import annotations
 
-import struct
-from collections.abc import Collection, Container, Iterator
+from collections.abc import Collection, Container, Iterator, Sequence
 from typing import IO
 
+from isal import isal_zlib
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Message
+from mcap.records import ChunkIndex, Message
 from mcap.summary import Summary
 
-from data_schemas.mcap.chunks import (
+from data_schemas.mcap.layout import (
+    INDEX_ENTRY,
+    INDEX_FIELDS,
     MESSAGE_FIELDS,
     MESSAGE_HEADER,
     RECORD_HEADER,
     STORED_CHUNK_HEADER,
 )
 
-#: Message index body up to its entries: channel id, entries length in bytes.
-_INDEX_FIELDS = struct.Struct("<HI")
-#: One index entry: log time, offset of the message record in the chunk's records.
-_ENTRY = struct.Struct("<QQ")
 #: Where one message lies: log time, file offset of its chunk's records, offset in them, channel
 #: id. Tuples sort in mcap's log-time order (log time, then position in the file).
 _Place = tuple[int, int, int, int]
@@ -51,9 +49,20 @@ class LogIndex:
         Every message's place, from the log's message indexes.
     """
 
-    def __init__(self, stream: IO[bytes], places: dict[int, list[_Place]]) -> None:
+    def __init__(
+        self,
+        stream: IO[bytes],
+        places: dict[int, list[_Place]],
+        chunks: Sequence[ChunkIndex] = (),
+    ) -> None:
         self._stream = stream
         self._places = places
+        self._chunks = list(chunks)
+
+    @property
+    def channel_ids(self) -> list[int]:
+        """Channels with indexed messages."""
+        return list(self._places)
 
     @classmethod
     def of(cls, stream: IO[bytes], summary: Summary | None) -> LogIndex | None:
@@ -73,21 +82,45 @@ class LogIndex:
             stream.seek(chunk.chunk_start_offset + chunk.chunk_length)
             block = stream.read(chunk.message_index_length)
             pos = 0
-            while pos + RECORD_HEADER.size + _INDEX_FIELDS.size <= len(block):
+            while pos + RECORD_HEADER.size + INDEX_FIELDS.size <= len(block):
                 opcode, length = RECORD_HEADER.unpack_from(block, pos)
                 body = pos + RECORD_HEADER.size
                 if opcode == Opcode.MESSAGE_INDEX:
-                    channel_id, size = _INDEX_FIELDS.unpack_from(block, body)
-                    first = body + _INDEX_FIELDS.size
+                    channel_id, size = INDEX_FIELDS.unpack_from(block, body)
+                    first = body + INDEX_FIELDS.size
                     places.setdefault(channel_id, []).extend(
                         (log_time_ns, records_at, offset, channel_id)
-                        for log_time_ns, offset in _ENTRY.iter_unpack(block[first : first + size])
+                        for log_time_ns, offset in INDEX_ENTRY.iter_unpack(
+                            block[first : first + size]
+                        )
                     )
                 pos = body + length
         counted = sum(len(p) for p in places.values())
         if summary.statistics is None or counted != summary.statistics.message_count:
             return None
-        return cls(stream, places)
+        return cls(stream, places, summary.chunk_indexes)
+
+    def verify(self) -> list[ChunkIndex]:
+        """Chunks that fail their CRC or whose message indexes disagree with their records.
+
+        Reads every chunk once (the CRC needs all its bytes); walks its record headers.
+        """
+        by_chunk: dict[int, list[tuple[int, int, int]]] = {}
+        for places in self._places.values():
+            for log_time_ns, records_at, offset, channel_id in places:
+                by_chunk.setdefault(records_at, []).append((offset, channel_id, log_time_ns))
+        bad = []
+        for chunk in self._chunks:
+            self._stream.seek(chunk.chunk_start_offset)
+            record = self._stream.read(chunk.chunk_length)
+            if len(record) != chunk.chunk_length or not _chunk_whole(record):
+                bad.append(chunk)
+                continue
+            records_at = chunk.chunk_start_offset + STORED_CHUNK_HEADER.size
+            indexed = sorted(by_chunk.get(records_at, []))
+            if _messages_in(memoryview(record)[STORED_CHUNK_HEADER.size :]) != indexed:
+                bad.append(chunk)
+        return bad
 
     def messages(
         self,
@@ -146,3 +179,33 @@ class LogIndex:
             publish_time=publish_time,
             sequence=sequence,
         )
+
+
+def _chunk_whole(record: bytes) -> bool:
+    """A stored chunk record whose CRC (if set) matches its records."""
+    fields = STORED_CHUNK_HEADER.unpack_from(record)
+    crc: int = fields[5]
+    records_length: int = fields[7]
+    if fields[0] != Opcode.CHUNK or fields[6] != 0:
+        return False
+    if records_length != len(record) - STORED_CHUNK_HEADER.size:
+        return False
+    return crc == 0 or isal_zlib.crc32(memoryview(record)[STORED_CHUNK_HEADER.size :]) == crc
+
+
+def _messages_in(records: memoryview) -> list[tuple[int, int, int]]:
+    """(offset, channel id, log time) of every message record, sorted; [] if malformed."""
+    found = []
+    pos = 0
+    end = len(records)
+    while pos < end:
+        if pos + RECORD_HEADER.size > end:
+            return [(-1, -1, -1)]
+        opcode, length = RECORD_HEADER.unpack_from(records, pos)
+        if opcode == Opcode.MESSAGE:
+            if pos + MESSAGE_HEADER.size > end:
+                return [(-1, -1, -1)]
+            _, _, channel, _, log_time, _ = MESSAGE_HEADER.unpack_from(records, pos)
+            found.append((pos, channel, log_time))
+        pos += RECORD_HEADER.size + length
+    return found if pos == end else [(-1, -1, -1)]

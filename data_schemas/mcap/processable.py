@@ -1,11 +1,13 @@
 """Open a finished bearing-slam log for processing: checks first, then messages in log-time order.
 
-Built on :class:`data_schemas.mcap.read.LogReader` (which recognises a file that is not MCAP or is
-unfinished) and the log's indexes (channels, time ranges, log-time order): messages are read in
-place through :class:`data_schemas.mcap.index.LogIndex` when the chunks are stored (the recorder's
-logs), by mcap's reader otherwise. Every problem a user can cause is one line: not MCAP,
-unfinished (``bslam recover``), no session metadata, no camera calibration, a channel with a
-schema this version does not know, a damaged log.
+Every chunk is checked before any message is used: its CRC, and its message indexes against its
+records. A log the recorder wrote (stored chunks, full summary) is then read in place through
+:class:`data_schemas.mcap.index.LogIndex`; anything else (compressed or unchunked files, no
+summary or an incomplete one, damage) through :class:`data_schemas.mcap.scan.LogScan`. Every
+problem a user can cause is one line: not MCAP, unfinished or corrupt (``bslam recover``, or
+``--skip-corrupt`` to process the rest), no session metadata, no camera calibration, a known
+channel with the wrong schema. Channels this version does not know (another tool's ``/chatter``
+beside ours) are ignored, with a note in :attr:`ProcessableLog.notes`.
 """
 
 from __future__ import annotations
@@ -18,12 +20,20 @@ from types import TracebackType
 from typing import IO
 
 from mcap.exceptions import McapError
-from mcap.reader import McapReader, make_reader
-from mcap.records import Message
+from mcap.reader import make_reader
+from mcap.records import Channel, Message, Metadata, Schema
+from mcap.summary import Summary
 
-from data_schemas.errors import LogError, MissingMetadataError, UnknownSchemaError
-from data_schemas.mcap.index import LogIndex
-from data_schemas.mcap.read import LogMessage, LogReader
+from data_schemas.errors import (
+    CorruptLogError,
+    LogError,
+    MissingMetadataError,
+    UnfinishedLogError,
+    UnknownSchemaError,
+)
+from data_schemas.mcap.index import DamagedLogError, LogIndex
+from data_schemas.mcap.read import LogMessage, corrupt_log_line, corruption
+from data_schemas.mcap.scan import Damage, LogScan
 from data_schemas.registry import IMAGE_SCHEMAS, SESSION_METADATA_NAME, TOPICS, schema_dict
 from data_schemas.session import Session, session_from_metadata
 
@@ -47,69 +57,156 @@ def _check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:
         )
 
 
+def _summary(file: IO[bytes]) -> Summary | None:
+    """The summary section, if the file has a readable one (else None: scan the file)."""
+    try:
+        file.seek(0)
+        return make_reader(file).get_summary()
+    except (McapError, ValueError, KeyError, UnicodeDecodeError, EOFError):
+        return None
+
+
 class ProcessableLog:
-    """A finished log with valid session metadata and only known schemas.
+    """A finished, undamaged log with valid session metadata (see module docstring).
 
     Parameters
     ----------
     path : str or os.PathLike
         The ``.mcap`` file.
+    skip_corrupt : bool
+        Process a corrupt log without its damaged chunks (listed in :attr:`skipped`) instead
+        of raising :class:`CorruptLogError`.
+
+    Attributes
+    ----------
+    topics : dict
+        Topic -> schema name of the channels used (ignored foreign channels excluded).
+    notes : list of str
+        Foreign channels ignored, one line each.
+    skipped : list of Damage
+        Damaged parts left out (``skip_corrupt`` only).
 
     Raises
     ------
-    NotMcapError, UnfinishedLogError, MissingMetadataError, SchemaError, UnknownSchemaError
+    NotMcapError, UnfinishedLogError, CorruptLogError, MissingMetadataError, SchemaError,
+    UnknownSchemaError
         One line naming the file and what to do.
     """
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], *, skip_corrupt: bool = False) -> None:
         self.path = Path(path)
         self.name = self.path.name
-        with LogReader(self.path) as reader:
-            metadata = reader.metadata
+        self.notes: list[str] = []
+        self.skipped: list[Damage] = []
+        self._skip = skip_corrupt
+        try:
+            self._file: IO[bytes] = open(self.path, "rb")  # noqa: SIM115 (closed in close)
+        except OSError as exc:
+            raise LogError(f"cannot open log {self.path}: {exc.strerror}") from None
+        try:
+            self._open(skip_corrupt)
+        except BaseException:
+            self._file.close()
+            raise
+
+    def _open(self, skip_corrupt: bool) -> None:
+        summary = _summary(self._file)
+        self._index = self._checked_index(summary)
+        schemas: dict[int, Schema]
+        channels: dict[int, Channel]
+        if self._index is not None:
+            assert summary is not None
+            schemas, channels = summary.schemas, summary.channels
+            metadata = self._indexed_metadata()
+        else:
+            schemas, channels, metadata = self._scanned(skip_corrupt)
         _check_calibration(self.name, metadata)
         try:
             self.session: Session = session_from_metadata(metadata[SESSION_METADATA_NAME])
         except MissingMetadataError as exc:
             raise MissingMetadataError(f"{self.name}: {exc}") from None
-        self._file: IO[bytes] = open(self.path, "rb")  # noqa: SIM115 (closed in close)
-        try:
-            self._reader: McapReader = make_reader(self._file)
-            summary = self._reader.get_summary()
-        except McapError as exc:
-            self._file.close()
-            raise LogError(f"{self.name}: cannot read the log's index ({exc})") from None
-        self._index = LogIndex.of(self._file, summary)
-        schemas = {} if summary is None else summary.schemas
         #: channel id -> (topic, schema name)
         self._channel_names: dict[int, tuple[str, str]] = {}
         self.topics: dict[str, str] = {}
-        for channel_id, channel in ({} if summary is None else summary.channels).items():
+        for channel_id, channel in channels.items():
             schema = schemas.get(channel.schema_id)
             schema_name = "" if schema is None else schema.name
-            self.topics[channel.topic] = schema_name
-            self._channel_names[channel_id] = (channel.topic, schema_name)
-        self._check_schemas()
+            if self._usable(channel.topic, schema_name):
+                self.topics[channel.topic] = schema_name
+                self._channel_names[channel_id] = (channel.topic, schema_name)
 
-    def _check_schemas(self) -> None:
-        for topic_name, schema_name in self.topics.items():
-            try:
-                schema_dict(schema_name)
-            except UnknownSchemaError:
-                self.close()
-                raise UnknownSchemaError(
-                    f"{self.name}: channel {topic_name} has schema {schema_name!r}, which this "
-                    "version of bearing-slam does not know; upgrade bearing-slam"
-                ) from None
-            known = TOPICS.get(topic_name)
-            allowed = (
-                IMAGE_SCHEMAS if topic_name == "/camera/panorama" else (known and known.schema,)
-            )
-            if known is not None and schema_name not in allowed:
-                self.close()
-                raise UnknownSchemaError(
-                    f"{self.name}: channel {topic_name} has schema {schema_name!r}, expected "
-                    f"{' or '.join(str(a) for a in allowed)}"
+    def _checked_index(self, summary: Summary | None) -> LogIndex | None:
+        """The in-place index of a log the recorder wrote, if every chunk checks out."""
+        if summary is None or not summary.channels:
+            return None
+        index = LogIndex.of(self._file, summary)
+        if index is None or any(c not in summary.channels for c in index.channel_ids):
+            return None
+        return None if index.verify() else index
+
+    def _indexed_metadata(self) -> dict[str, dict[str, str]]:
+        found: dict[str, dict[str, str]] = {}
+        try:
+            self._file.seek(0)
+            for record in make_reader(self._file).iter_metadata():
+                found.setdefault(record.name, dict(record.metadata))
+        except (McapError, ValueError, KeyError, UnicodeDecodeError, EOFError) as exc:
+            raise LogError(f"{self.name}: cannot read the log's metadata ({exc})") from None
+        return found
+
+    def _scanned(
+        self, skip_corrupt: bool
+    ) -> tuple[dict[int, Schema], dict[int, Channel], dict[str, dict[str, str]]]:
+        """Check the whole file with a scan: refuse it or note what ``skip_corrupt`` skips."""
+        metadata: dict[str, dict[str, str]] = {}
+        count = 0
+        with LogScan(self.path, salvage=not skip_corrupt) as scan:
+            for record in scan.records():
+                if isinstance(record, Metadata):
+                    metadata.setdefault(record.name, dict(record.metadata))
+                elif isinstance(record, Message):
+                    count += 1
+        corrupt = corruption(scan.damage)
+        if corrupt and not skip_corrupt:
+            raise CorruptLogError(
+                corrupt_log_line(
+                    self.name,
+                    corrupt,
+                    f"run `bslam recover {self.path} FIXED.mcap`, or pass --skip-corrupt to "
+                    "process the rest",
                 )
+            )
+        if not scan.finished and not corrupt:
+            raise UnfinishedLogError(
+                f"{self.name} is unfinished (the recording was interrupted): {count} "
+                f"messages are readable; run `bslam recover {self.path} FIXED.mcap`"
+            )
+        self.skipped = [d for d in corrupt if d.loses_data]
+        return scan.schemas, scan.channels, metadata
+
+    def _usable(self, topic_name: str, schema_name: str) -> bool:
+        """Whether a channel is used: a known schema on its topic; raise for a wrong one."""
+        known = TOPICS.get(topic_name)
+        try:
+            schema_dict(schema_name)
+        except UnknownSchemaError:
+            if known is None:
+                self.notes.append(
+                    f"{self.name}: channel {topic_name} (schema {schema_name!r}) is not "
+                    "bearing-slam's: ignored"
+                )
+                return False
+            raise UnknownSchemaError(
+                f"{self.name}: channel {topic_name} has schema {schema_name!r}, which this "
+                "version of bearing-slam does not know; upgrade bearing-slam"
+            ) from None
+        allowed = IMAGE_SCHEMAS if topic_name == "/camera/panorama" else (known and known.schema,)
+        if known is not None and schema_name not in allowed:
+            raise UnknownSchemaError(
+                f"{self.name}: channel {topic_name} has schema {schema_name!r}, expected "
+                f"{' or '.join(str(a) for a in allowed)}"
+            )
+        return True
 
     def messages(
         self,
@@ -124,11 +221,11 @@ class ProcessableLog:
         ``publish_times_ns``, if given, keeps only messages whose publish time is in it (in a
         log the recorder wrote, the others' data is not even read).
         """
-        wanted = None if topics is None else list(topics)
+        names = self._channel_names
+        ids = [i for i, (t, _) in names.items() if topics is None or t in topics]
         try:
-            for topic_name, schema_name, message in self._found(
-                wanted, start_ns, end_ns, publish_times_ns
-            ):
+            for message in self._found(ids, start_ns, end_ns, publish_times_ns):
+                topic_name, schema_name = names[message.channel_id]
                 yield LogMessage(
                     topic_name,
                     schema_name,
@@ -137,32 +234,39 @@ class ProcessableLog:
                     message.sequence,
                     message.data,
                 )
-        except McapError as exc:
-            raise LogError(
+        except DamagedLogError as exc:
+            raise CorruptLogError(
                 f"{self.name}: the log is damaged ({exc}); try `bslam recover`"
             ) from None
 
     def _found(
         self,
-        topics: list[str] | None,
+        ids: list[int],
         start_ns: int | None,
         end_ns: int | None,
         publish_times_ns: Container[int] | None,
-    ) -> Iterator[tuple[str, str, Message]]:
-        """(topic, schema name, message): read in place if the log allows, else by mcap."""
+    ) -> Iterator[Message]:
+        """Messages read in place if the log allows, else by a scan sorted by log time."""
         if self._index is not None:
-            names = self._channel_names
-            ids = [i for i, (t, _) in names.items() if topics is None or t in topics]
-            for message in self._index.messages(
+            yield from self._index.messages(
                 ids, start_ns=start_ns, end_ns=end_ns, publish_times_ns=publish_times_ns
-            ):
-                yield (*names[message.channel_id], message)
+            )
             return
-        for schema, channel, message in self._reader.iter_messages(
-            topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=True
-        ):
-            if publish_times_ns is None or message.publish_time in publish_times_ns:
-                yield channel.topic, "" if schema is None else schema.name, message
+        wanted = set(ids)
+        found: list[tuple[int, int, Message]] = []
+        with LogScan(self.path, salvage=not self._skip) as scan:
+            for record in scan.records():
+                if (
+                    isinstance(record, Message)
+                    and record.channel_id in wanted
+                    and (start_ns is None or record.log_time >= start_ns)
+                    and (end_ns is None or record.log_time < end_ns)
+                    and (publish_times_ns is None or record.publish_time in publish_times_ns)
+                ):
+                    found.append((record.log_time, len(found), record))
+        found.sort(key=lambda item: item[:2])
+        for _, _, message in found:
+            yield message
 
     def close(self) -> None:
         """Close the file."""

@@ -1,42 +1,33 @@
-"""Read bearing-slam logs, finished or not; summarise them; recover unfinished ones.
+"""Read bearing-slam logs in file order, finished or not, checking every chunk on the way.
 
-An unfinished log (the recorder was killed, or the disk filled up) has no summary or footer,
-so mcap's ``make_reader`` cannot index it. :class:`LogReader` reads records in file order and
-stops cleanly at the first incomplete or corrupt record (chunk CRCs are checked), so every
-complete chunk is readable. :func:`recover_log` rewrites those into a new, indexed file.
+:class:`LogReader` is built on :class:`data_schemas.mcap.scan.LogScan`: it reads any valid MCAP
+(stored or compressed chunks, unchunked files, metadata anywhere), checks chunk CRCs and message
+indexes, and refuses a damaged file with one line (``bslam recover`` rewrites what is left).
+An unfinished log (the recorder was killed, or the disk filled up) is readable up to its last
+complete message with ``allow_unfinished``.
 """
 
 from __future__ import annotations
 
 import io
 import os
-import struct
-import zlib
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from types import TracebackType
 from typing import IO, Any
 
-from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
-from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Message, Metadata, Schema
-from mcap.stream_reader import CRCValidationError, breakup_chunk
+from mcap.records import Channel, Message, Metadata, Schema
 
 from data_schemas.codec import decode
-from data_schemas.errors import (
-    LogError,
-    MissingMetadataError,
-    NotMcapError,
-    UnfinishedLogError,
-)
-from data_schemas.mcap.chunks import MAGIC, RECORD_HEADER, McapChunkWriter
+from data_schemas.errors import CorruptLogError, MissingMetadataError, UnfinishedLogError
+from data_schemas.mcap.scan import Damage, LogScan
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
 
 Source = str | os.PathLike[str] | IO[bytes]
-#: Chunk size of a recovered log.
-_RECOVER_CHUNK_BYTES = 4 * 1024 * 1024
+
+#: Damage that an interrupted recording leaves (the file just ends): "unfinished", not corrupt.
+CUT_END = frozenset({"cut chunk", "file end"})
 
 
 @dataclass(frozen=True)
@@ -67,16 +58,30 @@ class LogMessage:
         return decode(self.topic, self.data)
 
 
+def corruption(damage: list[Damage]) -> list[Damage]:
+    """The damage that is more than a cut-off end (what makes a log corrupt, not unfinished)."""
+    return [d for d in damage if d.what not in CUT_END]
+
+
+def corrupt_log_line(name: str, damage: list[Damage], advice: str) -> str:
+    """One line naming the first damage of a corrupt log, how much more, and what to do."""
+    more = f" (and {len(damage) - 1} more)" if len(damage) > 1 else ""
+    return f"{name} is corrupt: {damage[0].describe()}{more}; {advice}"
+
+
 class LogReader:
-    """Stream a bearing-slam MCAP log in file order.
+    """Stream a bearing-slam MCAP log in file order (one checking pass at open).
 
     Parameters
     ----------
     source : str, os.PathLike or binary stream (seekable)
-        The log. A path is opened and closed by the reader.
+        The log.
     allow_unfinished : bool
-        Read an unfinished log (up to its last complete chunk) instead of raising
+        Read an unfinished log (up to its last complete message) instead of raising
         :class:`UnfinishedLogError`.
+    allow_corrupt : bool
+        Read a corrupt log (what :class:`LogScan` salvages) instead of raising
+        :class:`CorruptLogError`.
 
     Raises
     ------
@@ -85,41 +90,56 @@ class LogReader:
     UnfinishedLogError
         The log has no footer and ``allow_unfinished`` is false (says how many messages are
         readable and suggests ``bslam recover``).
+    CorruptLogError
+        A chunk fails its CRC, an index disagrees with its chunk, or records are unreadable
+        (names the first damage, its time range and topics, and suggests ``bslam recover``).
     """
 
-    def __init__(self, source: Source, *, allow_unfinished: bool = False) -> None:
+    def __init__(
+        self, source: Source, *, allow_unfinished: bool = False, allow_corrupt: bool = False
+    ) -> None:
         if isinstance(source, str | os.PathLike):
             self.name = os.fspath(source)
-            try:
-                self._stream: IO[bytes] = open(self.name, "rb")  # noqa: SIM115 (closed in close)
-            except OSError as exc:
-                raise LogError(f"cannot open log {self.name}: {exc.strerror}") from None
-            self._owned = True
+            self._source: str | bytes = self.name
         else:
-            self._stream = source
             self.name = str(getattr(source, "name", "<stream>"))
-            self._owned = False
-        try:
-            self._start = self._stream.tell()
-            self._size = self._stream.seek(0, io.SEEK_END) - self._start
-            self._stream.seek(self._start)
-            if self._stream.read(len(MAGIC)) != MAGIC:
-                raise NotMcapError(f"{self.name} is not an MCAP file (bad magic bytes)")
-            self.finished = self._has_footer()
-            self.metadata = self._leading_metadata()
-            if not self.finished and not allow_unfinished:
-                count = sum(1 for _ in self.messages())
-                raise UnfinishedLogError(
-                    f"{self.name} is unfinished (the recording was interrupted): {count} "
-                    f"messages are readable; run `bslam recover {self.name} FIXED.mcap`"
-                )
-        except BaseException:
-            self.close()
-            raise
-        #: bytes after the last complete record of the last :meth:`messages` pass
-        self.trailing_bytes = 0
-        #: complete chunks seen in the last :meth:`messages` pass
+            source.seek(0)
+            self._source = source.read()
+        #: complete chunks seen (CRC checked)
         self.chunk_count = 0
+        #: bytes after the last complete record (a cut-off end), 0 if none
+        self.trailing_bytes = 0
+        self.metadata: dict[str, dict[str, str]] = {}
+        count = 0
+        with self._scan() as scan:
+            for record in scan.records():
+                if isinstance(record, Metadata):
+                    self.metadata.setdefault(record.name, dict(record.metadata))
+                elif isinstance(record, Message):
+                    count += 1
+            self._note(scan)
+            #: every damaged stretch found (a cut-off end included)
+            self.damage = scan.damage
+            self.finished = scan.finished and not scan.damage
+        corrupt = corruption(self.damage)
+        if corrupt and not allow_corrupt:
+            raise CorruptLogError(
+                corrupt_log_line(self.name, corrupt, f"run `bslam recover {self.name} FIXED.mcap`")
+            )
+        if not scan.finished and not allow_unfinished:
+            raise UnfinishedLogError(
+                f"{self.name} is unfinished (the recording was interrupted): {count} "
+                f"messages are readable; run `bslam recover {self.name} FIXED.mcap`"
+            )
+
+    def _scan(self) -> LogScan:
+        if isinstance(self._source, bytes):
+            return LogScan(io.BytesIO(self._source))
+        return LogScan(self._source)
+
+    def _note(self, scan: LogScan) -> None:
+        self.chunk_count = scan.chunks
+        self.trailing_bytes = scan.trailing_bytes
 
     # ------------------------------------------------------------------ public API
     def session(self) -> Session:
@@ -154,19 +174,15 @@ class LogReader:
                     )
 
     def raw_records(self) -> Iterator[Schema | Channel | Message]:
-        """Schema, channel and message records of every complete chunk, in file order."""
-        self.chunk_count = 0
-        for record in self._records():
-            if isinstance(record, Chunk):
-                self.chunk_count += 1
-                for inner in breakup_chunk(record):
-                    if isinstance(inner, Schema | Channel | Message):
-                        yield inner
+        """Schema, channel and message records that check out, in file order."""
+        with self._scan() as scan:
+            for record in scan.records():
+                if isinstance(record, Schema | Channel | Message):
+                    yield record
+            self._note(scan)
 
     def close(self) -> None:
-        """Close the file if the reader opened it."""
-        if self._owned:
-            self._stream.close()
+        """Nothing stays open between passes (kept for ``with`` blocks)."""
 
     def __enter__(self) -> LogReader:
         return self
@@ -178,215 +194,3 @@ class LogReader:
         tb: TracebackType | None,
     ) -> None:
         self.close()
-
-    # ------------------------------------------------------------------ internals
-    def _has_footer(self) -> bool:
-        tail = 1 + 8 + 20 + len(MAGIC)  # footer record + closing magic
-        if self._size < len(MAGIC) + tail:
-            return False
-        self._stream.seek(self._start + self._size - tail)
-        data = self._stream.read(tail)
-        return data[-len(MAGIC) :] == MAGIC and data[0] == Opcode.FOOTER
-
-    def _leading_metadata(self) -> dict[str, dict[str, str]]:
-        """Metadata records before the first chunk (the recorder writes the session first)."""
-        found: dict[str, dict[str, str]] = {}
-        for record in self._records(stop_at_chunk=True):
-            if isinstance(record, Metadata):
-                found[record.name] = dict(record.metadata)
-        return found
-
-    def _records(self, *, stop_at_chunk: bool = False) -> Iterator[Metadata | Chunk]:
-        """Complete top-level metadata and chunk records; stop at the footer or the damage.
-
-        With ``stop_at_chunk``, stop before the first chunk instead (not read, not checked).
-        """
-        end = self._start + self._size
-        pos = self._start + len(MAGIC)
-        self.trailing_bytes = 0
-        while True:
-            self._stream.seek(pos)
-            header = self._stream.read(RECORD_HEADER.size)
-            if len(header) < RECORD_HEADER.size:
-                self.trailing_bytes = end - pos
-                return
-            opcode, length = RECORD_HEADER.unpack(header)
-            body_start = pos + RECORD_HEADER.size
-            if length > end - body_start:
-                self.trailing_bytes = end - pos
-                return
-            if opcode == Opcode.FOOTER or (stop_at_chunk and opcode == Opcode.CHUNK):
-                return
-            if opcode in (Opcode.METADATA, Opcode.CHUNK):
-                body = self._stream.read(length)
-                record = _parse(opcode, body)
-                if record is None:
-                    self.trailing_bytes = end - pos
-                    return
-                yield record
-            pos = body_start + length
-
-
-def _parse(opcode: int, body: bytes) -> Metadata | Chunk | None:
-    """A metadata or (CRC-checked) chunk record, or None if it is corrupt."""
-    stream = ReadDataStream(io.BytesIO(body))
-    try:
-        if opcode == Opcode.METADATA:
-            metadata: Metadata = Metadata.read(stream)
-            return metadata
-        chunk: Chunk = Chunk.read(stream)
-        breakup_chunk(chunk, validate_crc=True)  # decompress + CRC: is the chunk whole?
-        return chunk
-    except (McapError, CRCValidationError, struct.error, UnicodeDecodeError, zlib.error):
-        return None
-    except Exception as exc:  # zstd/lz4 raise their own error types on damaged data
-        if type(exc).__module__.split(".")[0] in ("zstandard", "lz4", "_lz4"):
-            return None
-        raise
-
-
-# ---------------------------------------------------------------------- summary for `info`
-@dataclass(frozen=True)
-class ChannelSummary:
-    """One channel of a log: topic, schema name and message count."""
-
-    topic: str
-    schema: str
-    count: int
-
-
-@dataclass(frozen=True)
-class LogSummary:
-    """What ``bslam info`` prints about a log.
-
-    Attributes
-    ----------
-    finished : bool
-        True if the log has a summary and footer (indexed); False if it was interrupted.
-    channels : list of ChannelSummary
-        In order of first appearance.
-    message_count : int
-        Readable messages (for an unfinished log: those in complete chunks).
-    start_ns, end_ns : int or None
-        First and last ``log_time`` (ns since the epoch), None for an empty log.
-    metadata : dict
-        Metadata records: name -> key/value map.
-    trailing_bytes : int
-        Bytes after the last complete record (an interrupted chunk), 0 if none.
-    """
-
-    name: str
-    finished: bool
-    channels: list[ChannelSummary]
-    message_count: int
-    chunk_count: int
-    start_ns: int | None
-    end_ns: int | None
-    metadata: dict[str, dict[str, str]]
-    trailing_bytes: int
-
-    @property
-    def duration_s(self) -> float:
-        """Time between the first and last message, seconds (0 for an empty log)."""
-        if self.start_ns is None or self.end_ns is None:
-            return 0.0
-        return (self.end_ns - self.start_ns) / 1e9
-
-
-def log_summary(source: Source) -> LogSummary:
-    """Summarise a log, finished or not (one streaming pass)."""
-    with LogReader(source, allow_unfinished=True) as reader:
-        counts: dict[str, int] = {}
-        schemas: dict[str, str] = {}
-        start: int | None = None
-        end: int | None = None
-        n = 0
-        for msg in reader.messages():
-            counts[msg.topic] = counts.get(msg.topic, 0) + 1
-            schemas.setdefault(msg.topic, msg.schema)
-            start = msg.log_time_ns if start is None else min(start, msg.log_time_ns)
-            end = msg.log_time_ns if end is None else max(end, msg.log_time_ns)
-            n += 1
-        return LogSummary(
-            name=reader.name,
-            finished=reader.finished,
-            channels=[ChannelSummary(t, schemas[t], c) for t, c in counts.items()],
-            message_count=n,
-            chunk_count=reader.chunk_count,
-            start_ns=start,
-            end_ns=end,
-            metadata=reader.metadata,
-            trailing_bytes=reader.trailing_bytes,
-        )
-
-
-# ---------------------------------------------------------------------- recover
-@dataclass(frozen=True)
-class RecoverReport:
-    """What :func:`recover_log` kept: messages, chunks read, channels, bytes dropped."""
-
-    messages: int
-    chunks: int
-    channels: int
-    dropped_bytes: int
-    was_finished: bool
-
-
-def recover_log(broken: str | os.PathLike[str], fixed: str | os.PathLike[str]) -> RecoverReport:
-    """Rewrite every complete chunk of ``broken`` into a new indexed log ``fixed``.
-
-    Metadata records, schemas, channels and message times are kept as they were.
-
-    Raises
-    ------
-    LogError
-        ``fixed`` is ``broken``, or it cannot be written.
-    NotMcapError
-        ``broken`` is not an MCAP file.
-    """
-    if os.path.abspath(broken) == os.path.abspath(fixed):
-        raise LogError(f"recover writes a new file: give an output path other than {broken}")
-    with LogReader(broken, allow_unfinished=True) as reader:
-        try:
-            out = open(fixed, "wb")  # noqa: SIM115 (closed below)
-        except OSError as exc:
-            raise LogError(f"cannot create {os.fspath(fixed)}: {exc.strerror}") from None
-        with out:
-            writer = McapChunkWriter(out, library="bearing-slam recover")
-            writer.start(reader.metadata)
-            schema_ids: dict[int, int] = {}
-            channel_ids: dict[int, int] = {}
-            messages = 0
-            for record in reader.raw_records():
-                if isinstance(record, Schema):
-                    if record.id not in schema_ids:
-                        schema_ids[record.id] = writer.add_schema(
-                            record.name, record.encoding, record.data
-                        )
-                elif isinstance(record, Channel):
-                    if record.id not in channel_ids:
-                        channel_ids[record.id] = writer.add_channel(
-                            record.topic,
-                            record.message_encoding,
-                            schema_ids.get(record.schema_id, 0),
-                            dict(record.metadata),
-                        )
-                else:
-                    writer.add_message(
-                        channel_ids[record.channel_id],
-                        record.sequence,
-                        record.log_time,
-                        record.publish_time,
-                        [record.data],
-                    )
-                    messages += 1
-                    if writer.pending_bytes >= _RECOVER_CHUNK_BYTES:
-                        writer.close_chunk()
-            writer.finish()
-        return RecoverReport(
-            messages=messages,
-            chunks=reader.chunk_count,
-            channels=len(channel_ids),
-            dropped_bytes=reader.trailing_bytes,
-            was_finished=reader.finished,
-        )

@@ -354,11 +354,12 @@ class KheperaRobot:
         msg: dict[str, Any] = {
             "timestamp": stamp_from_ns(t0_ns),
             "request": request,
-            "reply": reply,
             "outcome": outcome,
             "latency_ns": max(0, self._clock.monotonic_ns() - t0_ns),
             "attempt": attempt,
         }
+        if reply is not None:  # no reply: the field is absent (optional in the schema)
+            msg["reply"] = reply
         if detail is not None:
             msg["detail"] = detail
         self._on_exchange(msg)

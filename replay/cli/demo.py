@@ -24,12 +24,14 @@ import click
     help="Seed of the simulated trajectory and of the estimator.",
 )
 @click.option("--omni", is_flag=True, help="Use the omnidirectional (donut) camera model.")
-def demo(out_dir: Path, seed: int, omni: bool) -> None:
+@click.option("--force", is_flag=True, help="Replace the results of an earlier demo in --out.")
+def demo(out_dir: Path, seed: int, omni: bool, force: bool) -> None:
     """Simulate the paper's arena (10 movements), build the map, write demo.rrd.
 
     Writes the simulated log, the derived log, the summary JSON and a Rerun recording of every
     stage into --out, then says how to open them.
     """
+    from data_schemas.outputs import OutputGuard
     from recorder.sim.scenario import builtin_scenario
     from recorder.sim.simulate import simulate_to_file
     from replay.cli.process import show_skips
@@ -38,23 +40,33 @@ def demo(out_dir: Path, seed: int, omni: bool) -> None:
     from replay.records import MethodConfig
     from replay.rerun_out import save_rrd
 
-    out_dir.mkdir(parents=True, exist_ok=True)
     log = out_dir / "demo.mcap"
-    scenario = "paper_omni" if omni else "paper"
-    click.echo(f"simulating the paper's arena ({scenario}, seed {seed}) ...")
-    sim = builtin_scenario(scenario).with_seed(seed)
-    run_recording(
-        log,
-        lambda progress: simulate_to_file(sim, log, source=scenario, progress=progress),
-        total=sim.trajectory.n_moves,
-    )
     rrd, derived, summary = (
         out_dir / "demo.rrd",
         out_dir / "demo.derived.mcap",
         out_dir / "demo.summary.json",
     )
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise click.ClickException(f"cannot create folder {out_dir}: {exc.strerror}") from None
+    guard = OutputGuard(force=force)
+    for path in (log, rrd, derived, summary):  # all refused before anything is written
+        guard.claim(path, what="demo output")
+    scenario = "paper_omni" if omni else "paper"
+    click.echo(f"simulating the paper's arena ({scenario}, seed {seed}) ...")
+    sim = builtin_scenario(scenario).with_seed(seed)
+    run_recording(
+        log,
+        lambda path, progress: simulate_to_file(sim, path, source=scenario, progress=progress),
+        total=sim.trajectory.n_moves,
+        force=force,
+        staged=True,
+    )
     with show_skips():
-        doc = save_rrd(log, MethodConfig(seed=seed), rrd, out=derived, summary=summary)
+        doc = save_rrd(
+            log, MethodConfig(seed=seed), rrd, out=derived, summary=summary, force=force
+        )
     click.echo(f"map: {result_line(doc)}")
     for name, est in doc["landmarks"].items():
         x, y = est["mean"]

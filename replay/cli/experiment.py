@@ -29,10 +29,17 @@ def _int_list(text: str, option: str) -> tuple[int, ...]:
     return values
 
 
-def _out_dir(out: Path) -> Path:
+def _out_dir(out: Path, force: bool) -> Path:
     if out.exists() and not out.is_dir():
         raise ExperimentArgumentError(f"--out {out}: is a file; give a folder for the outputs")
-    out.mkdir(parents=True, exist_ok=True)
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise ExperimentArgumentError(
+            f"--out {out}: the folder holds earlier results; pass --force to replace them"
+        )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ExperimentArgumentError(f"--out {out}: cannot create it ({exc.strerror})") from None
     return out
 
 
@@ -102,6 +109,7 @@ def _common(fn: Any) -> Any:
             "--seed", type=int, default=0, show_default=True, help="Run i uses seed SEED + i."
         ),
         click.option("--quiet", is_flag=True, help="No progress bar."),
+        click.option("--force", is_flag=True, help="Replace earlier results in --out."),
     ]
     for option in reversed(options):
         fn = option(fn)
@@ -143,7 +151,7 @@ def paper(**kw: Any) -> None:
     from replay.experiments.experiment import paper_experiment
     from replay.experiments.report import n_l_flatness, table_markdown
 
-    out = _out_dir(kw["out"])
+    out = _out_dir(kw["out"], kw["force"])
     proto = _protocol(
         kw,
         40 if kw["runs"] is None else kw["runs"],
@@ -179,7 +187,7 @@ def sweep(**kw: Any) -> None:
     from replay.experiments.experiment import sweep_experiment
     from replay.experiments.report import sweep_table_markdown
 
-    out = _out_dir(kw["out"])
+    out = _out_dir(kw["out"], kw["force"])
     values = [v.strip() for v in kw["values"].split(",") if v.strip()]
     if not values:
         raise ExperimentArgumentError("--values: give at least one value, e.g. 0.5,1,2")

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 if TYPE_CHECKING:
-    from replay.records import MethodConfig
+    from replay.batch import LogJob
 
 PRIOR_CHOICES = ("impartial", "gaussian", "mixture")
 
@@ -108,6 +108,12 @@ def show_skips() -> Iterator[None]:
     metavar="ADDRESS",
     help="Run on a Dask cluster (e.g. tcp://host:8786) instead of local processes.",
 )
+@click.option("--force", is_flag=True, help="Replace existing outputs (never a log).")
+@click.option(
+    "--skip-corrupt",
+    is_flag=True,
+    help="Process a corrupt log without its damaged chunks (warned) instead of refusing it.",
+)
 def process(
     logs: tuple[str, ...],
     out: Path | None,
@@ -118,6 +124,8 @@ def process(
     seed: int,
     workers: int,
     scheduler: str | None,
+    force: bool,
+    skip_corrupt: bool,
 ) -> None:
     """Process LOGS (files, folders or globs) into maps.
 
@@ -126,7 +134,7 @@ def process(
     each skipped movement is reported on stderr. Several logs run in parallel with one result
     line per log (skips are counted there); one failing log is reported and the others go on.
     """
-    from replay.batch import expand_logs
+    from replay.batch import expand_logs, plan_jobs
     from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
 
@@ -134,31 +142,25 @@ def process(
     paths = expand_logs(logs)
     if len(paths) == 1 and scheduler is None:
         with show_skips():
-            doc = process_log(paths[0], method, out=out, summary=summary)
+            doc = process_log(
+                paths[0], method, out=out, summary=summary, force=force, skip_corrupt=skip_corrupt
+            )
         if out is None and summary is None:
             click.echo(dumps(doc))
         else:
             click.echo(f"{paths[0]}: {result_line(doc)}")
         return
-    _process_many(paths, out, summary, method, workers, scheduler)
+    jobs = plan_jobs(paths, out, summary, method, force=force, skip_corrupt=skip_corrupt)
+    _process_many(jobs, workers, scheduler)
 
 
-def _process_many(
-    paths: list[Path],
-    out: Path | None,
-    summary: Path | None,
-    method: MethodConfig,
-    workers: int,
-    scheduler: str | None,
-) -> None:
+def _process_many(jobs: list[LogJob], workers: int, scheduler: str | None) -> None:
     """Many logs (or a Dask run): a pool, a progress bar and one result line per log."""
     from tqdm import tqdm  # the pool, the bar and Dask only when there are many logs
 
-    from replay.batch import plan_jobs, process_job
+    from replay.batch import process_job
     from replay.parallel import Outcome, run_tasks
     from replay.process import result_line
-
-    jobs = plan_jobs(paths, out, summary, method)
 
     def report(outcome: Outcome[dict[str, Any]]) -> None:
         log = jobs[outcome.index].log

@@ -83,6 +83,8 @@ def record(
     frame_rate_hz: float,
     encoding: str,
     png_level: int,
+    chunk_compression: str,
+    force: bool,
     baud: int,
     model: str,
     mm_per_pulse: float,
@@ -103,7 +105,7 @@ def record(
     from recorder.robot import KheperaRobot, RobotConfig
     from recorder.session import build_session_doc, load_calibration_file, load_landmark_file
     from recorder.timebase import EpochClock
-    from replay.cli.recording import run_recording
+    from replay.cli.recording import claim_log, run_recording
 
     distance_m = _distance_range(distance)
     cal = load_calibration_file(calibration)
@@ -115,7 +117,9 @@ def record(
         frame_rate_hz=frame_rate_hz,
         encoding="png" if encoding == "png" else "bgr8",
         png_level=png_level,
+        chunk_compression="" if chunk_compression == "none" else chunk_compression,
     )
+    claim_log(out, force=force, inputs=[calibration, landmarks])  # before the robot moves
     clock = EpochClock(SystemClock())
     camera = OpenCVCamera(camera_source, cal)
     try:
@@ -139,8 +143,12 @@ def record(
             rig = Rig(robot=robot, sink=sink, camera=camera, clock=clock)
             run_recording(
                 out,
-                lambda progress: record_to_file(out, doc, rig, plan, settings, progress=progress),
+                lambda path, progress: record_to_file(
+                    path, doc, rig, plan, settings, progress=progress
+                ),
                 total=moves or None,
+                force=force,
+                inputs=[calibration, landmarks],
             )
     finally:
         camera.close()

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
@@ -18,7 +20,8 @@ F = TypeVar("F", bound=Callable[..., Any])
 def frame_options(func: F) -> F:
     """The frame-capture options shared by ``record`` and ``simulate``.
 
-    Adds ``--rate`` (``frame_rate_hz``), ``--encoding`` and ``--png-level``.
+    Adds ``--rate`` (``frame_rate_hz``), ``--encoding``, ``--png-level``,
+    ``--chunk-compression`` and ``--force``.
     """
     for option in reversed(
         (
@@ -44,42 +47,85 @@ def frame_options(func: F) -> F:
                 show_default=True,
                 help="PNG compression: 0 stored (fastest), 1 fast (half size), up to 3.",
             ),
+            click.option(
+                "--chunk-compression",
+                type=click.Choice(["none", "zstd"]),
+                default="none",
+                show_default=True,
+                help="Compress log chunks (zstd pays off for bgr8 frames, not for PNG).",
+            ),
+            click.option(
+                "--force",
+                is_flag=True,
+                help="If --out exists, move it aside (to NAME.old-N.mcap) instead of refusing.",
+            ),
         )
     ):
         func = option(func)
     return func
 
 
+def claim_log(
+    out: str | os.PathLike[str], *, force: bool, inputs: Sequence[str | os.PathLike[str]] = ()
+) -> None:
+    """Refuse ``out`` now (one line) if it is an input, exists without ``force``, or cannot be
+    written (see :class:`data_schemas.outputs.OutputGuard`)."""
+    from data_schemas.outputs import OutputGuard
+
+    OutputGuard(inputs, force=force).claim(out, what="log")
+
+
 def run_recording(
     out: str | os.PathLike[str],
-    record: Callable[[Callable[[Progress], None]], RecordResult],
+    record: Callable[[Path, Callable[[Progress], None]], RecordResult],
     *,
     total: int | None,
+    force: bool = False,
+    inputs: Sequence[str | os.PathLike[str]] = (),
+    staged: bool = False,
 ) -> None:
-    """Run ``record(progress)`` with a progress bar on stderr; report the result on stdout.
+    """Run ``record(path, progress)`` with a progress bar on stderr; report on stdout.
 
-    ``record`` is a library call that writes the log ``out`` and reports each movement to the
-    callback it is given (:func:`recorder.record.record_to_file`,
+    ``record`` is a library call that writes the log at ``path`` and reports each movement to
+    the callback it is given (:func:`recorder.record.record_to_file`,
     :func:`recorder.sim.simulate.simulate_to_file`); ``total`` is the number of moves for the bar
     (None: unknown). A stop request (SIGINT/SIGTERM) finishes the log and exits with 128 + the
     signal number.
+
+    ``out`` is checked first (:func:`claim_log`). ``staged`` (a simulation, which can be run
+    again): the log is written beside ``out`` and renamed onto it when finished. Otherwise (a
+    recording, whose log must be on disk as it grows) an existing ``out`` is moved aside to
+    ``NAME.old-N.mcap`` (``force`` only), never overwritten.
     """
     from tqdm import tqdm
 
+    from data_schemas.outputs import OutputGuard, move_aside
     from recorder.record import RecordingInterrupted
 
-    with tqdm(total=total, unit="move", file=sys.stderr, desc="recording") as bar:
+    guard = OutputGuard(inputs, force=force)
+    guard.claim(out, what="log")
+    interrupted: RecordingInterrupted | None = None
+    with contextlib.ExitStack() as stack:
+        if staged:
+            path = stack.enter_context(guard.staged(out))
+        else:
+            path = Path(out)
+            aside = move_aside(path)
+            if aside is not None:
+                click.echo(f"moved the existing {os.fspath(out)} aside to {aside}", err=True)
+        with tqdm(total=total, unit="move", file=sys.stderr, desc="recording") as bar:
 
-        def progress(p: Progress) -> None:
-            bar.update(p.movements - bar.n)
-            bar.set_postfix(frames=p.frames)
+            def progress(p: Progress) -> None:
+                bar.update(p.movements - bar.n)
+                bar.set_postfix(frames=p.frames)
 
-        try:
-            result = record(progress)
-        except RecordingInterrupted as exc:
-            bar.close()
-            click.echo(f"{exc}; {os.fspath(out)} is finished and indexed", err=True)
-            click.get_current_context().exit(128 + exc.signum)
+            try:
+                result = record(path, progress)
+            except RecordingInterrupted as exc:
+                interrupted = exc  # the log is finished: keep it
+    if interrupted is not None:
+        click.echo(f"{interrupted}; {os.fspath(out)} is finished and indexed", err=True)
+        click.get_current_context().exit(128 + interrupted.signum)
     click.echo(f"wrote {os.fspath(out)}: {result.movements} movements, {result.frames} frames")
 
 

@@ -1,6 +1,8 @@
-"""``bslam recover BROKEN.mcap FIXED.mcap``: index every complete chunk of an unfinished log."""
+"""``bslam recover BROKEN.mcap FIXED.mcap``: rewrite everything a damaged log still holds."""
 
 from __future__ import annotations
+
+import sys
 
 import click
 
@@ -8,14 +10,20 @@ import click
 @click.command("recover")
 @click.argument("broken", type=click.Path(dir_okay=False))
 @click.argument("fixed", type=click.Path(dir_okay=False))
-def recover(broken: str, fixed: str) -> None:
-    """Rewrite every complete chunk of BROKEN (an interrupted log) into a new indexed FIXED."""
-    from data_schemas.mcap.read import recover_log
+@click.option("--force", is_flag=True, help="Replace FIXED if it exists (never BROKEN).")
+def recover(broken: str, fixed: str, force: bool) -> None:
+    """Rewrite every message, metadata and attachment of BROKEN that checks out into FIXED.
 
-    report = recover_log(broken, fixed)
-    note = " (it was already finished)" if report.was_finished else ""
-    click.echo(
-        f"recovered {report.messages} messages ({report.channels} channels, {report.chunks} "
-        f"chunks) from {broken}{note} into {fixed}; dropped {report.dropped_bytes} bytes of an "
-        "incomplete chunk"
-    )
+    Works on interrupted recordings, cut or corrupt files and any valid MCAP. Exit 0 when
+    nothing was lost, 3 when something was (each damaged part is listed), 1 when nothing could
+    be read.
+    """
+    from data_schemas.mcap.recover import recover_log
+
+    report = recover_log(broken, fixed, force=force)
+    lines = report.lines(broken, fixed)
+    click.echo(lines[0])
+    for line in lines[1:]:
+        click.echo(line, err=True)
+    if report.exit_code:
+        sys.exit(report.exit_code)

@@ -21,6 +21,12 @@ from replay.cli.process import method_options, show_skips
 )
 @click.option("--serve", is_flag=True, help="Serve the recording (gRPC + web viewer) until Ctrl-C.")
 @click.option("--keyframes-only", is_flag=True, help="Skip the frames between keyframes.")
+@click.option("--force", is_flag=True, help="Replace an existing --save file (never LOG).")
+@click.option(
+    "--skip-corrupt",
+    is_flag=True,
+    help="Replay a corrupt log without its damaged chunks (warned) instead of refusing it.",
+)
 @method_options
 def replay(
     log: Path,
@@ -29,6 +35,8 @@ def replay(
     connect: str | None,
     serve: bool,
     keyframes_only: bool,
+    force: bool,
+    skip_corrupt: bool,
     prior: str,
     n_r: int,
     n_l: int,
@@ -38,11 +46,10 @@ def replay(
 
     Without a target option it saves LOG's name with .rrd in the current folder.
     """
-    from data_schemas.mcap.processable import ProcessableLog
     from replay.cli.recording import viewer_command
-    from replay.process import result_line
+    from replay.process import open_log, result_line
     from replay.records import MethodConfig
-    from replay.rerun_out import RerunTarget, open_recording, replay_log
+    from replay.rerun_out import RerunTarget, open_recording, recording_id, replay_log, save_rrd
 
     chosen = [
         k
@@ -53,17 +60,27 @@ def replay(
         raise click.UsageError(f"choose one of --save, --spawn, --connect, --serve (got {chosen})")
     if not chosen:
         save = Path(log.stem + ".rrd")
-    where = str(save) if save else connect
-    target = RerunTarget(chosen[0] if chosen else "save", where)  # type: ignore[arg-type]
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
-    with ProcessableLog(log) as opened:  # a bad log fails here, before any output exists
-        rec, url = open_recording(log.stem, target)
-        try:
-            with show_skips():
+    url = None
+    if save:
+        with show_skips():
+            doc = save_rrd(
+                log,
+                method,
+                save,
+                force=force,
+                skip_corrupt=skip_corrupt,
+                images=not keyframes_only,
+            )
+    else:
+        target = RerunTarget(chosen[0], connect)  # type: ignore[arg-type]
+        with show_skips(), open_log(log, skip_corrupt=skip_corrupt) as opened:
+            rec, url = open_recording(recording_id(opened), target)
+            try:
                 doc = replay_log(opened, method, rec, images=not keyframes_only)
-        finally:
-            if not serve:
-                rec.disconnect()
+            finally:
+                if not serve:
+                    rec.disconnect()
     click.echo(f"{log}: {result_line(doc)}")
     if save:
         click.echo(f"wrote {save}; open it with: {viewer_command()} {save}")

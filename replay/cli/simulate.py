@@ -40,6 +40,8 @@ def simulate(
     png_level: int,
     turn_noise: float,
     distance_noise: float,
+    chunk_compression: str,
+    force: bool,
 ) -> None:
     """Simulate a session: the same record loop as `bslam record`, in virtual time.
 
@@ -63,14 +65,18 @@ def simulate(
             frame_rate_hz=frame_rate_hz,
             encoding="png" if encoding == "png" else "bgr8",
             png_level=png_level,
+            chunk_compression="" if chunk_compression == "none" else chunk_compression,
         ),
         turn_noise=turn_noise,
         distance_noise=distance_noise,
     )
     run_recording(
         out,
-        lambda progress: simulate_to_file(
-            scenario, out, settings=settings, source=scenario_arg, progress=progress
+        lambda path, progress: simulate_to_file(
+            scenario, path, settings=settings, source=scenario_arg, progress=progress
         ),
         total=scenario.trajectory.n_moves,
+        force=force,
+        inputs=[] if scenario_arg in BUILTIN_SCENARIOS else [scenario_arg],
+        staged=True,
     )

@@ -37,6 +37,11 @@ class SettableClock:
         """Nothing waits in a derived log."""
 
 
+def _cov_xy(cov: NDArray[np.floating]) -> dict[str, float]:
+    """A 2x2 covariance as ``{xx, xy, yy}`` (Foxglove reads no arrays of arrays)."""
+    return {"xx": float(cov[0, 0]), "xy": float(cov[0, 1]), "yy": float(cov[1, 1])}
+
+
 def point_set(name: str, points: NDArray[np.floating]) -> dict[str, Any]:
     """A ``bslam.PointSet``: named particles (n, 2) as ``x`` and ``y`` lists."""
     p = np.asarray(points, np.float64).reshape(-1, 2)
@@ -74,27 +79,28 @@ class DerivedLogSink:
         self._writer.write(topic, msg)
 
     def frame(self, frame: FrameRecord) -> None:
-        keyframe = None
-        if frame.keyframe is not None:
-            keyframe = {"index": frame.keyframe[0], "phase": frame.keyframe[1]}
-        detections = [
-            {
+        # optional fields are left out rather than null (Foxglove's schema parser has no nulls)
+        detections = []
+        for d in frame.detections.values():
+            detection: dict[str, Any] = {
                 "name": d.name,
                 "visible": d.visible,
-                "bearing_rad": d.bearing_rad,
                 "width_rad": d.width_rad,
                 "confidence": d.confidence,
                 "n_pixels": d.n_pixels,
                 "n_blobs": d.n_blobs,
-                "reason": d.reason,
             }
-            for d in frame.detections.values()
-        ]
-        msg = {
+            if d.bearing_rad is not None:
+                detection["bearing_rad"] = d.bearing_rad
+            if d.reason is not None:
+                detection["reason"] = d.reason
+            detections.append(detection)
+        msg: dict[str, Any] = {
             "timestamp": stamp_from_ns(frame.timestamp_ns),
-            "keyframe": keyframe,
             "detections": detections,
         }
+        if frame.keyframe is not None:
+            msg["keyframe"] = {"index": frame.keyframe[0], "phase": frame.keyframe[1]}
         self._write(frame.log_time_ns, "/pipeline/bearings", msg)
 
     def movement(self, record: MovementRecord) -> None:
@@ -133,7 +139,7 @@ class DerivedLogSink:
                 {"name": n, "reason": r} for n, r in record.skipped_landmarks.items()
             ],
             "landmarks": [
-                {"name": n, "mean": e.mean_fl.tolist(), "cov": e.cov_fl.tolist()}
+                {"name": n, "mean": e.mean_fl.tolist(), "cov": _cov_xy(e.cov_fl)}
                 for n, e in record.estimates.items()
             ],
         }

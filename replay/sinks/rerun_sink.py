@@ -141,12 +141,13 @@ class RerunSink:
     rec : rerun.RecordingStream
         Where to log (its sink: file, viewer, server, is the caller's choice).
     images : bool
-        Log every frame (with masks); False logs only keyframe bearings (smaller, faster).
+        Log every frame (with masks); False logs only the keyframes (panorama, masks, bearings:
+        smaller, faster).
     """
 
     def __init__(self, rec: rr.RecordingStream, *, images: bool = True) -> None:
         self.rec = rec
-        self.wants_images = images
+        self.wants_images = True  # the keyframes' panoramas are shown either way
         self.wants_all_frames = images
         self._run: RunInfo | None = None
         self._rgb: dict[str, tuple[int, int, int]] = {}

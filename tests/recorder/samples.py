@@ -18,8 +18,8 @@ T0_NS = 1_700_000_000_000_000_000
 
 
 def make_session_doc() -> dict[str, Any]:
-    """A real-robot session document for a 32x16 unwrapped camera."""
-    return build_session_doc(
+    """A real-robot session document for a 32x16 unwrapped camera (a fixed session id)."""
+    doc = build_session_doc(
         created_unix_ns=T0_NS,
         robot={
             "model": "khepera",
@@ -36,6 +36,8 @@ def make_session_doc() -> dict[str, Any]:
         reference=("L1", "L2"),
         vision_error_rad=math.radians(3.0),
     )
+    doc["session_id"] = "5e55" * 8
+    return doc
 
 
 def sample_messages(t_ns: int, rng: np.random.Generator) -> dict[str, dict[str, Any]]:

@@ -11,7 +11,7 @@ from logfactory import session_doc, write_log
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from data_schemas.mcap.chunks import MESSAGE_HEADER
+from data_schemas.mcap.layout import MESSAGE_HEADER
 from replay.cli import cli
 
 
@@ -22,9 +22,7 @@ def _raw_mcap(path: Path, metadata: dict[str, str] | None, schema: str = "bslam.
         if metadata is not None:
             w.add_metadata("bslam.session", metadata)
         sid = w.register_schema(schema, "jsonschema", b"{}")
-        cid = w.register_channel(
-            "/acme" if schema != "bslam.Movement" else "/robot/movement", "json", sid
-        )
+        cid = w.register_channel("/robot/movement", "json", sid)
         w.add_message(cid, 1, b"{}", 1)
         w.finish()
     return path
@@ -74,7 +72,7 @@ EXPECTED = {
     "no-calibration": "no camera calibration",
     "unknown-schema": "'acme.Widget', which this version of bearing-slam does not know",
     "missing": "no such file",
-    "damaged": "the log is damaged",
+    "damaged": "is corrupt: chunk at bytes",
 }
 
 

@@ -18,7 +18,9 @@ import numpy as np
 import pytest
 
 from data_schemas.codec import validate
-from data_schemas.mcap.read import LogReader, log_summary, recover_log
+from data_schemas.mcap.info import log_summary
+from data_schemas.mcap.read import LogReader
+from data_schemas.mcap.recover import recover_log
 from data_schemas.registry import TOPICS
 from recorder.clock import SystemClock
 from recorder.sim.fake_khepera import FakeKhepera

@@ -11,8 +11,9 @@ import pyarrow as pa
 import pytest
 import rerun as rr
 from click.testing import CliRunner
-from logfactory import HEIGHT, MOVES
+from logfactory import HEIGHT, MOVES, write_log
 
+from data_schemas.mcap.read import LogReader
 from replay.cli import cli
 from replay.process import process_log
 from replay.records import MethodConfig
@@ -151,3 +152,30 @@ def test_blueprint_is_stored(replayed: tuple[Path, dict[str, Any]]) -> None:
     reader = rr.chunk.RrdReader(replayed[0])
     assert len(reader.blueprints()) == 1
     assert math.isfinite(len(reader.recordings()))
+
+
+def test_keyframes_only_still_shows_the_keyframes(small_log: Path, tmp_path: Path) -> None:
+    rrd = tmp_path / "keys.rrd"
+    args = ["replay", str(small_log), "--save", str(rrd), "--keyframes-only", "--n-l", "100"]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    rows = _read(rrd)
+    assert len(_column(rows["/camera/panorama"], "EncodedImage:blob")) == 2 * len(MOVES)
+    assert len(_column(rows["/camera/panorama/masks"], "SegmentationImage:buffer")) == 2 * len(
+        MOVES
+    )
+
+
+def test_recording_id_is_the_session_id(tmp_path: Path) -> None:
+    ids = []
+    for folder in ("a", "b"):  # two sessions, the same file name
+        (tmp_path / folder).mkdir()
+        log = write_log(tmp_path / folder / "demo.mcap")
+        rrd = tmp_path / folder / "demo.rrd"
+        result = CliRunner().invoke(cli, ["replay", str(log), "--save", str(rrd), "--n-l", "50"])
+        assert result.exit_code == 0, result.output
+        [entry] = rr.chunk.RrdReader(rrd).recordings()
+        with LogReader(log) as reader:
+            assert entry.recording_id == reader.session().session_id
+        ids.append(entry.recording_id)
+    assert ids[0] != ids[1]

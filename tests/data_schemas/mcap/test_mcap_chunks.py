@@ -11,7 +11,8 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, DataEnd, Footer, Header, MessageIndex, Metadata
 from mcap.stream_reader import StreamReader, breakup_chunk
 
-from data_schemas.mcap.chunks import MAGIC, McapChunkWriter
+from data_schemas.mcap.chunks import McapChunkWriter
+from data_schemas.mcap.layout import MAGIC
 
 
 def _write(chunks: list[list[tuple[int, int, list[bytes]]]]) -> bytes:

@@ -10,8 +10,9 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 
-from data_schemas.mcap.chunks import MESSAGE_HEADER, McapChunkWriter
+from data_schemas.mcap.chunks import McapChunkWriter
 from data_schemas.mcap.index import DamagedLogError, LogIndex
+from data_schemas.mcap.layout import MESSAGE_HEADER
 
 
 def _recorded(seed: int = 3) -> bytes:

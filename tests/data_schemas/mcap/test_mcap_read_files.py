@@ -9,8 +9,17 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from data_schemas.errors import LogError, MissingMetadataError, NotMcapError, UnfinishedLogError
-from data_schemas.mcap.read import LogReader, log_summary, recover_log
+from data_schemas.errors import (
+    CorruptLogError,
+    LogError,
+    MissingMetadataError,
+    NotMcapError,
+    OutputError,
+    UnfinishedLogError,
+)
+from data_schemas.mcap.info import log_summary
+from data_schemas.mcap.read import LogReader
+from data_schemas.mcap.recover import recover_log
 from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import SESSION_METADATA_NAME
 from recorder.clock import VirtualClock
@@ -29,22 +38,6 @@ def _finished_log(path: Path, frames: int = 30) -> None:
             clock.sleep(0.01)
 
 
-def _complete_before(path: Path, cut: int) -> int:
-    """Messages of the original file that lie in chunks ending before byte ``cut``."""
-    with path.open("rb") as f:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        assert summary is not None
-        ends = [
-            c.message_end_time
-            for c in summary.chunk_indexes
-            if c.chunk_start_offset + c.chunk_length <= cut
-        ]
-        if not ends:
-            return 0
-        return sum(1 for _, _, m in reader.iter_messages() if m.log_time <= max(ends))
-
-
 def test_summary_of_finished_log(tmp_path: Path) -> None:
     path = tmp_path / "a.mcap"
     _finished_log(path, frames=10)
@@ -60,40 +53,38 @@ def test_summary_of_finished_log(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("fraction", [0.35, 0.6, 0.93])
-def test_truncated_log_reads_every_complete_chunk(tmp_path: Path, fraction: float) -> None:
+def test_truncated_log_reads_every_complete_message(tmp_path: Path, fraction: float) -> None:
     path = tmp_path / "a.mcap"
     _finished_log(path)
     data = path.read_bytes()
     cut = int(len(data) * fraction)
     broken = tmp_path / "broken.mcap"
     broken.write_bytes(data[:cut])
-    expected = _complete_before(path, cut)
-    assert expected > 0
+    with LogReader(path) as reader:
+        original = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
+    expected = [m for m in original if data.find(m[2]) + len(m[2]) <= cut]
+    assert 0 < len(expected) < len(original)
 
-    readable = rf"unfinished .*: {expected} messages are readable; run `bslam recover"
+    readable = rf"unfinished .*: {len(expected)} messages are readable; run `bslam recover"
     with pytest.raises(UnfinishedLogError, match=readable):
         LogReader(broken)
     with LogReader(broken, allow_unfinished=True) as reader:
         assert not reader.finished
         assert reader.session().reference == ("L1", "L2")
-        assert sum(1 for _ in reader.messages()) == expected
+        assert [(m.topic, m.log_time_ns, m.data) for m in reader.messages()] == expected
 
     fixed = tmp_path / "fixed.mcap"
     report = recover_log(broken, fixed)
-    assert report.messages == expected and not report.was_finished
-    assert report.dropped_bytes > 0
+    assert report.messages == len(expected) and not report.was_finished
     with LogReader(fixed) as reader:  # finished now: no allow_unfinished needed
         assert reader.finished
         assert reader.metadata == log_summary(path).metadata
-        got = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
-    with LogReader(path) as reader:
-        original = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
-    assert got == original[:expected]
+        assert [(m.topic, m.log_time_ns, m.data) for m in reader.messages()] == expected
     with fixed.open("rb") as f:  # and the index is valid for mcap's own reader
-        assert sum(1 for _ in make_reader(f).iter_messages()) == expected
+        assert sum(1 for _ in make_reader(f).iter_messages()) == len(expected)
 
 
-def test_corrupt_chunk_stops_the_read(tmp_path: Path) -> None:
+def test_corrupt_chunk_is_refused_then_read_around(tmp_path: Path) -> None:
     path = tmp_path / "a.mcap"
     _finished_log(path)
     with path.open("rb") as f:
@@ -101,15 +92,24 @@ def test_corrupt_chunk_stops_the_read(tmp_path: Path) -> None:
     assert summary is not None
     third = summary.chunk_indexes[2]
     data = bytearray(path.read_bytes())
-    flip = third.chunk_start_offset + third.chunk_length - 10
-    data[flip] ^= 0xFF
+    data[third.chunk_start_offset + third.chunk_length - 10] ^= 0xFF
     broken = tmp_path / "broken.mcap"
-    broken.write_bytes(bytes(data[: third.chunk_start_offset + third.chunk_length + 5]))
-    with LogReader(broken, allow_unfinished=True) as reader:
+    broken.write_bytes(bytes(data))
+    with pytest.raises(CorruptLogError, match=r"chunk at bytes \d+-\d+: CRC mismatch, log time"):
+        LogReader(broken)
+    with LogReader(broken, allow_corrupt=True) as reader:
         n = sum(1 for _ in reader.messages())
-        assert reader.chunk_count == 2
-    second = summary.chunk_indexes[1]
-    assert n == _complete_before(path, second.chunk_start_offset + second.chunk_length)
+        assert reader.chunk_count == len(summary.chunk_indexes) - 1
+        assert not reader.finished
+    assert n == sum(summary.statistics.channel_message_counts.values())  # type: ignore[union-attr]
+    s = log_summary(broken)
+    assert s.state == "corrupt" and not s.finished
+    [damage] = s.damage
+    assert (damage.start_ns, damage.end_ns) == (
+        third.message_start_time,
+        third.message_end_time,
+    )
+    assert damage.topics == {"/camera/panorama", "/robot/odometry"} or damage.topics
 
 
 def test_not_mcap(tmp_path: Path) -> None:
@@ -147,5 +147,5 @@ def test_empty_unfinished_log_has_only_metadata(tmp_path: Path) -> None:
 def test_recover_refuses_to_overwrite_its_input(tmp_path: Path) -> None:
     path = tmp_path / "a.mcap"
     _finished_log(path, frames=2)
-    with pytest.raises(LogError, match="other than"):
+    with pytest.raises(OutputError, match="is the input"):
         recover_log(path, path)

@@ -1,0 +1,216 @@
+"""What ``bslam info`` reports about a log, as data (:func:`log_summary`) and as lines.
+
+One checking pass of :class:`data_schemas.mcap.scan.LogScan`: channels and their message counts,
+time range, chunks and their compression, metadata and attachments wherever they lie, the state
+of the file (finished and indexed, finished without an index, unfinished, corrupt) and every
+damaged stretch with its time range and topics.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+from dataclasses import dataclass
+
+from mcap.records import Attachment, Channel, Message, Metadata
+
+from data_schemas.errors import BslamError
+from data_schemas.mcap.read import corruption
+from data_schemas.mcap.scan import Damage, LogScan
+from data_schemas.registry import SESSION_METADATA_NAME
+from data_schemas.session import session_from_metadata
+
+
+@dataclass(frozen=True)
+class ChannelSummary:
+    """One channel of a log: topic, schema name and message count."""
+
+    topic: str
+    schema: str
+    count: int
+
+
+@dataclass(frozen=True)
+class AttachmentSummary:
+    """One attachment: name, media type, size in bytes, log time (ns)."""
+
+    name: str
+    media_type: str
+    size: int
+    log_time_ns: int
+
+
+@dataclass(frozen=True)
+class LogSummary:
+    """What ``bslam info`` reports about a log.
+
+    Attributes
+    ----------
+    name : str
+        The file.
+    state : str
+        ``"finished"`` (footer, and no damage), ``"unfinished"`` (the file just ends, as when a
+        recording is interrupted) or ``"corrupt"`` (damage anywhere else).
+    indexed : bool
+        A summary section with a CRC that matches (a chunked file: with chunk indexes).
+    channels : list of ChannelSummary
+        In order of first appearance; channels without messages included.
+    message_count : int
+        Readable messages (for a damaged log: those that check out or were salvaged).
+    chunk_count : int
+        Chunks read whole (CRC checked).
+    compressions : tuple of str
+        Compressions of those chunks (``"stored"`` for uncompressed).
+    start_ns, end_ns : int or None
+        First and last ``log_time`` (ns since the epoch), None for an empty log.
+    metadata : dict
+        Metadata records: name -> key/value map (first record of each name).
+    attachments : list of AttachmentSummary
+    damage : list of Damage
+        Every damaged stretch, in file order (a cut-off end included).
+    trailing_bytes : int
+        Bytes after the last complete record (an interrupted chunk), 0 if none.
+    """
+
+    name: str
+    state: str
+    indexed: bool
+    channels: list[ChannelSummary]
+    message_count: int
+    chunk_count: int
+    compressions: tuple[str, ...]
+    start_ns: int | None
+    end_ns: int | None
+    metadata: dict[str, dict[str, str]]
+    attachments: list[AttachmentSummary]
+    damage: list[Damage]
+    trailing_bytes: int
+
+    @property
+    def finished(self) -> bool:
+        """The log is finished and undamaged."""
+        return self.state == "finished"
+
+    @property
+    def duration_s(self) -> float:
+        """Time between the first and last message, seconds (0 for an empty log)."""
+        if self.start_ns is None or self.end_ns is None:
+            return 0.0
+        return (self.end_ns - self.start_ns) / 1e9
+
+
+def log_summary(source: str | os.PathLike[str]) -> LogSummary:
+    """Summarise a log, finished, unfinished or damaged (one checking pass)."""
+    with LogScan(source) as scan:
+        counts: dict[int, int] = {}
+        metadata: dict[str, dict[str, str]] = {}
+        attachments: list[AttachmentSummary] = []
+        order: list[int] = []
+        start: int | None = None
+        end: int | None = None
+        for record in scan.records():
+            if isinstance(record, Message):
+                counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+                t = record.log_time
+                start = t if start is None else min(start, t)
+                end = t if end is None else max(end, t)
+            elif isinstance(record, Channel):
+                order.append(record.id)
+            elif isinstance(record, Metadata):
+                metadata.setdefault(record.name, dict(record.metadata))
+            elif isinstance(record, Attachment):
+                attachments.append(
+                    AttachmentSummary(
+                        record.name, record.media_type, len(record.data), record.log_time
+                    )
+                )
+        channels = []
+        for channel_id in order:
+            channel = scan.channels[channel_id]
+            schema = scan.schemas.get(channel.schema_id)
+            channels.append(
+                ChannelSummary(
+                    channel.topic, "" if schema is None else schema.name, counts.get(channel_id, 0)
+                )
+            )
+        if corruption(scan.damage):
+            state = "corrupt"
+        elif not scan.finished or scan.damage:
+            state = "unfinished"
+        else:
+            state = "finished"
+        return LogSummary(
+            name=scan.name,
+            state=state,
+            indexed=scan.has_summary,
+            channels=channels,
+            message_count=scan.messages,
+            chunk_count=scan.chunks,
+            compressions=tuple(sorted(c or "stored" for c in scan.compressions)),
+            start_ns=start,
+            end_ns=end,
+            metadata=metadata,
+            attachments=attachments,
+            damage=list(scan.damage),
+            trailing_bytes=scan.trailing_bytes,
+        )
+
+
+def _when(t_ns: int | None) -> str:
+    if t_ns is None:
+        return "-"
+    return datetime.datetime.fromtimestamp(t_ns / 1e9, tz=datetime.UTC).isoformat()
+
+
+def _state_line(s: LogSummary) -> str:
+    if s.state == "finished":
+        return "finished (indexed)" if s.indexed else "finished (no index)"
+    if s.state == "unfinished":
+        return "UNFINISHED (recording was interrupted)"
+    return f"CORRUPT ({len(corruption(s.damage))} damaged part(s), listed below)"
+
+
+def _session_lines(metadata: dict[str, dict[str, str]]) -> list[str]:
+    record = metadata.get(SESSION_METADATA_NAME)
+    if record is None:
+        return ["session: none (no 'bslam.session' metadata: not a bearing-slam recording?)"]
+    try:
+        session = session_from_metadata(record)
+    except BslamError as exc:
+        return [f"session: invalid ({exc})"]
+    doc = session.doc
+    robot, camera = doc["robot"], doc["camera"]
+    cal = session.calibration
+    kind = "simulated" if session.simulated else "recorded"
+    catalog = ", ".join(f"{lm.name} ({lm.color})" for lm in session.landmarks)
+    return [
+        f"session: {kind} with {robot['model']} on {robot['port']}, "
+        f"software {doc['software_version']}, created {_when(doc['created_unix_ns'])}",
+        f"camera: {camera['source']}, {cal.model} {cal.width}x{cal.height}, "
+        f"{camera.get('encoding', '?')}, {camera.get('frame_rate_hz', '?')} Hz",
+        f"landmarks: {catalog}; reference {session.reference[0]}, "
+        f"{session.reference[1]}; vision error {doc['vision_error_deg']:g} deg",
+    ]
+
+
+def summary_lines(s: LogSummary) -> list[str]:
+    """The report ``bslam info`` prints, line by line."""
+    lines = [f"{s.name}: {_state_line(s)}", *_session_lines(s.metadata)]
+    for name in sorted(set(s.metadata) - {SESSION_METADATA_NAME}):
+        lines.append(f"metadata {name}: {json.dumps(s.metadata[name])}")
+    for a in s.attachments:
+        lines.append(f"attachment {a.name}: {a.media_type}, {a.size} bytes")
+    chunks = f"{s.chunk_count} chunks" + (
+        f" ({', '.join(s.compressions)})" if s.compressions else ""
+    )
+    lines.append(
+        f"messages: {s.message_count} in {chunks}; start {_when(s.start_ns)}, "
+        f"end {_when(s.end_ns)}, duration {s.duration_s:.3f} s"
+    )
+    width = max([len("topic")] + [len(c.topic) for c in s.channels])
+    swidth = max([len("schema")] + [len(c.schema) for c in s.channels])
+    lines.append(f"  {'topic':<{width}}  {'schema':<{swidth}}  count")
+    lines += [f"  {c.topic:<{width}}  {c.schema:<{swidth}}  {c.count}" for c in s.channels]
+    lines += [f"damaged: {d.describe()}" for d in s.damage]
+    return lines

@@ -1,0 +1,167 @@
+"""Any valid MCAP is read: layouts other writers produce, checked against mcap's stream reader.
+
+Each file holds the same bearing-slam session (the ``small_log`` fixture), rewritten with the
+``mcap`` library or laid out by hand: unchunked, zstd and lz4 chunks, metadata after the chunks,
+no summary, a summary without channels, attachments, a foreign channel beside ours. ``info``
+must count what mcap's reference stream reader counts, and ``process`` must map the same as
+from the original log.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+from mcap.records import Channel, Message
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, IndexType, Writer
+
+from data_schemas.mcap.chunks import McapChunkWriter
+from data_schemas.mcap.info import log_summary
+from data_schemas.mcap.read import LogReader
+from data_schemas.registry import MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json
+from replay.cli import cli
+
+Layout = Callable[[Path, Path], None]
+
+
+def _records(log: Path) -> tuple[dict[str, dict[str, str]], list[Any]]:
+    with LogReader(log) as reader:
+        return reader.metadata, list(reader.messages())
+
+
+def _library(**options: Any) -> Layout:
+    """Rewrite a log with mcap's own Writer (``options`` passed to it)."""
+    attach = options.pop("attach", False)
+    chatter = options.pop("chatter", False)
+
+    def write(src: Path, dst: Path) -> None:
+        metadata, messages = _records(src)
+        with dst.open("wb") as f:
+            w = Writer(f, **options)
+            w.start(library="another writer")
+            for name, values in metadata.items():
+                w.add_metadata(name, values)
+            channels: dict[str, int] = {}
+            for m in messages:
+                if m.topic not in channels:
+                    sid = w.register_schema(m.schema, SCHEMA_ENCODING, schema_json(m.schema))
+                    channels[m.topic] = w.register_channel(m.topic, MESSAGE_ENCODING, sid)
+                w.add_message(
+                    channels[m.topic], m.log_time_ns, m.data, m.publish_time_ns, m.sequence
+                )
+                if chatter:
+                    if "/chatter" not in channels:
+                        sid = w.register_schema("std_msgs/String", "ros2msg", b"string data")
+                        channels["/chatter"] = w.register_channel("/chatter", "cdr", sid)
+                    w.add_message(channels["/chatter"], m.log_time_ns, b"\x00\x01hi", m.log_time_ns)
+            if attach:
+                w.add_attachment(5, 6, "calibration.yaml", "text/yaml", b"fx: 1\n")
+            w.finish()
+
+    return write
+
+
+def _metadata_after_chunks(src: Path, dst: Path) -> None:
+    """Our chunk writer, with the metadata written after every chunk (as `mcap add metadata`)."""
+    metadata, messages = _records(src)
+    with dst.open("wb") as f:
+        w = McapChunkWriter(f, library="hand-built")
+        w.start({})
+        channels: dict[str, int] = {}
+        for i, m in enumerate(messages):
+            if m.topic not in channels:
+                sid = w.add_schema(m.schema, SCHEMA_ENCODING, schema_json(m.schema))
+                channels[m.topic] = w.add_channel(m.topic, MESSAGE_ENCODING, sid)
+            w.add_message(channels[m.topic], m.sequence, m.log_time_ns, m.publish_time_ns, [m.data])
+            if i % 7 == 6:
+                w.close_chunk()
+        w.close_chunk()
+        for name, values in metadata.items():
+            w.add_metadata(name, values)
+        w.finish()
+
+
+LAYOUTS: dict[str, Layout] = {
+    "unchunked": _library(use_chunking=False),
+    "zstd": _library(compression=CompressionType.ZSTD, chunk_size=4096),
+    "lz4": _library(compression=CompressionType.LZ4, chunk_size=4096),
+    "metadata-after-chunks": _metadata_after_chunks,
+    "no-summary": _library(
+        index_types=IndexType.NONE,
+        repeat_channels=False,
+        repeat_schemas=False,
+        use_statistics=False,
+        use_summary_offsets=False,
+        chunk_size=4096,
+    ),
+    "summary-without-channels": _library(
+        compression=CompressionType.ZSTD, repeat_channels=False, chunk_size=4096
+    ),
+    "attachment": _library(attach=True, chunk_size=4096),
+    "foreign-channel": _library(chatter=True, compression=CompressionType.NONE, chunk_size=8192),
+}
+
+
+def _reference_counts(path: Path) -> Counter[str]:
+    """Messages per topic, as mcap's stream reader sees them."""
+    topics: dict[int, str] = {}
+    counts: Counter[str] = Counter()
+    with path.open("rb") as f:
+        for record in StreamReader(f).records:
+            if isinstance(record, Channel):
+                topics[record.id] = record.topic
+            elif isinstance(record, Message):
+                counts[topics[record.channel_id]] += 1
+    return counts
+
+
+@pytest.fixture(scope="module")
+def original_doc(small_log: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    out = tmp_path_factory.mktemp("orig") / "s.json"
+    result = CliRunner().invoke(cli, ["process", str(small_log), "--summary", str(out)])
+    assert result.exit_code == 0, result.output
+    doc: dict[str, Any] = json.loads(out.read_text())
+    return doc
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_info_counts_agree_with_reference_reader(
+    small_log: Path, tmp_path: Path, layout: str
+) -> None:
+    path = tmp_path / f"{layout}.mcap"
+    LAYOUTS[layout](small_log, path)
+    s = log_summary(path)
+    assert {c.topic: c.count for c in s.channels} == dict(_reference_counts(path))
+    assert s.state == "finished" and s.damage == []
+    assert s.metadata == log_summary(small_log).metadata
+    assert s.indexed == (layout != "no-summary")
+    if layout == "attachment":
+        assert [(a.name, a.media_type, a.size) for a in s.attachments] == [
+            ("calibration.yaml", "text/yaml", 6)
+        ]
+    result = CliRunner().invoke(cli, ["info", str(path)])
+    assert result.exit_code == 0, result.output
+    expected_state = "finished (no index)" if layout == "no-summary" else "finished (indexed)"
+    assert expected_state in result.output
+
+
+@pytest.mark.parametrize("layout", sorted(LAYOUTS))
+def test_process_maps_the_same_from_any_layout(
+    small_log: Path, tmp_path: Path, layout: str, original_doc: dict[str, Any]
+) -> None:
+    path = tmp_path / f"{layout}.mcap"
+    LAYOUTS[layout](small_log, path)
+    out = tmp_path / "s.json"
+    result = CliRunner().invoke(cli, ["process", str(path), "--summary", str(out)])
+    assert result.exit_code == 0, result.output
+    if layout == "foreign-channel":
+        assert "channel /chatter (schema 'std_msgs/String') is not bearing-slam's" in result.output
+    doc = json.loads(out.read_text())
+    assert doc["landmarks"] == original_doc["landmarks"]
+    assert doc["movements"] == original_doc["movements"]
