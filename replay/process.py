@@ -9,10 +9,9 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import LogError
-from replay.logs import ProcessableLog
 from replay.records import MethodConfig, Sink
 from replay.sinks.summary import SummarySink
-from replay.stages import run_log
+from replay.stages import MessageLog, run_log
 
 _FLAT_LIST = re.compile(r"\[\s+([^\[\]{}]*?)\s+\]")
 
@@ -33,7 +32,7 @@ def write_json(path: str | os.PathLike[str], doc: dict[str, Any]) -> None:
 
 
 def process_log(
-    log: str | os.PathLike[str] | ProcessableLog,
+    log: str | os.PathLike[str] | MessageLog,
     method: MethodConfig,
     *,
     out: str | os.PathLike[str] | None = None,
@@ -44,8 +43,8 @@ def process_log(
 
     Parameters
     ----------
-    log : path or ProcessableLog
-        A finished bearing-slam log (a path, or one already opened).
+    log : path, ProcessableLog or FollowedLog
+        A finished bearing-slam log (a path, or one already opened), or a log being followed.
     method : MethodConfig
         Prior, particle counts and seed.
     out : path, optional
@@ -60,7 +59,7 @@ def process_log(
     if out is not None:
         from replay.sinks.derived import DerivedLogSink  # the MCAP writer only when asked
 
-        source = log.path if isinstance(log, ProcessableLog) else Path(log)
+        source = Path(log) if isinstance(log, str | os.PathLike) else log.path
         if Path(out).resolve() == source.resolve():
             raise LogError(f"{log}: --out would overwrite the source log; choose another path")
         sinks.append(DerivedLogSink(out))

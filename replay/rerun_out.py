@@ -15,6 +15,7 @@ from replay.logs import ProcessableLog
 from replay.process import process_log
 from replay.records import PRIORS, MethodConfig
 from replay.sinks.rerun_sink import RerunSink
+from replay.stages import MessageLog
 
 APPLICATION_ID = "bearing-slam"
 
@@ -52,7 +53,7 @@ def open_recording(name: str, target: RerunTarget) -> tuple[rr.RecordingStream, 
 
 
 def replay_log(
-    log: str | os.PathLike[str] | ProcessableLog,
+    log: str | os.PathLike[str] | MessageLog,
     method: MethodConfig,
     rec: rr.RecordingStream,
     *,

@@ -31,6 +31,13 @@ from replay.cli.recording import frame_options
     show_default=True,
     help="Actuation noise: relative std of each straight distance.",
 )
+@click.option(
+    "--speed",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Run at FACTOR x real time (1 = real time); default as fast as possible.",
+    metavar="FACTOR",
+)
 def simulate(
     scenario_arg: str,
     out: str,
@@ -40,6 +47,7 @@ def simulate(
     png_level: int,
     turn_noise: float,
     distance_noise: float,
+    speed: float | None,
 ) -> None:
     """Simulate a session: the same record loop as `bslam record`, in virtual time.
 
@@ -66,6 +74,7 @@ def simulate(
         ),
         turn_noise=turn_noise,
         distance_noise=distance_noise,
+        speed=speed,
     )
     run_recording(
         out,
