@@ -15,14 +15,11 @@ from pathlib import Path
 from types import TracebackType
 
 from data_schemas.errors import MissingMetadataError
-from data_schemas.mcap.follow import FollowEnd, LogFollower
+from data_schemas.mcap.follow import IDLE_TIMEOUT_S, FollowEnd, LogFollower
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
 from recorder.logread import LogMessage
 from replay.logs import _check_calibration
-
-#: Default seconds without growth before following stops.
-IDLE_TIMEOUT_S = 10.0
 
 
 class FollowedLog:

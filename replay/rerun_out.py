@@ -32,10 +32,15 @@ class RerunTarget:
     where: str | None = None
 
 
-def open_recording(name: str, target: RerunTarget) -> tuple[rr.RecordingStream, str | None]:
-    """A recording stream connected to ``target``; also the server URL when serving."""
+def open_recording(
+    name: str, target: RerunTarget, *, live: bool = False
+) -> tuple[rr.RecordingStream, str | None]:
+    """A recording stream connected to ``target``; also the server URL when serving.
+
+    ``live``: the blueprint follows the latest movement (a log being followed).
+    """
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=name)
-    blueprint = method_blueprint(fig1_priors=PRIORS)
+    blueprint = method_blueprint(fig1_priors=PRIORS, live=live)
     url = None
     try:
         if target.kind == "save":
@@ -58,14 +63,16 @@ def replay_log(
     rec: rr.RecordingStream,
     *,
     images: bool = True,
+    live: bool = False,
     out: str | os.PathLike[str] | None = None,
     summary: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
     """Stream every stage of ``log`` to ``rec`` (and Fig. 1); return the summary document.
 
     ``out`` and ``summary``, if given, also receive the derived log and the summary JSON.
+    ``live``: frames are sent with each movement (a log being followed), not in batches.
     """
-    sink = RerunSink(rec, images=images)
+    sink = RerunSink(rec, images=images, live=live)
     return process_log(log, method, out=out, summary=summary, extra_sinks=(sink,))
 
 

@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from replay.cli.follow import end_of_follow, follow_options
+
 if TYPE_CHECKING:
     from replay.records import MethodConfig
 
@@ -108,6 +110,7 @@ def show_skips() -> Iterator[None]:
     metavar="ADDRESS",
     help="Run on a Dask cluster (e.g. tcp://host:8786) instead of local processes.",
 )
+@follow_options
 def process(
     logs: tuple[str, ...],
     out: Path | None,
@@ -118,6 +121,8 @@ def process(
     seed: int,
     workers: int,
     scheduler: str | None,
+    follow: bool,
+    idle_timeout: float,
 ) -> None:
     """Process LOGS (files, folders or globs) into maps.
 
@@ -125,12 +130,19 @@ def process(
     in FL. With one log and neither --out nor --summary, the summary JSON goes to stdout, and
     each skipped movement is reported on stderr. Several logs run in parallel with one result
     line per log (skips are counted there); one failing log is reported and the others go on.
+
+    With --follow, LOG (one file) is still being written: each movement is processed once its
+    whole chunk is on disk, a compact view of the map is updated in place on stderr, and the
+    command ends when LOG is finished (exit 0) or idle for --idle-timeout seconds (exit 1).
     """
     from replay.batch import expand_logs
     from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
 
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
+    if follow:
+        _process_followed(logs, out, summary, method, idle_timeout, scheduler)
+        return
     paths = expand_logs(logs)
     if len(paths) == 1 and scheduler is None:
         with show_skips():
@@ -141,6 +153,30 @@ def process(
             click.echo(f"{paths[0]}: {result_line(doc)}")
         return
     _process_many(paths, out, summary, method, workers, scheduler)
+
+
+def _process_followed(
+    logs: tuple[str, ...],
+    out: Path | None,
+    summary: Path | None,
+    method: MethodConfig,
+    idle_timeout: float,
+    scheduler: str | None,
+) -> None:
+    """One log followed while it is written, with the terminal view on stderr."""
+    from replay.follow import FollowedLog
+    from replay.process import dumps, process_log, result_line
+    from replay.sinks.terminal import TerminalView
+
+    if len(logs) != 1 or scheduler is not None:
+        raise click.UsageError("--follow takes one LOG file (and no --scheduler)")
+    with FollowedLog(logs[0], idle_timeout_s=idle_timeout) as log:
+        doc = process_log(log, method, out=out, summary=summary, extra_sinks=(TerminalView(),))
+    if out is None and summary is None:
+        click.echo(dumps(doc))
+    else:
+        click.echo(f"{logs[0]}: {result_line(doc)}")
+    end_of_follow(log)
 
 
 def _process_many(

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.follow import end_of_follow, follow_options
 from replay.cli.process import method_options, show_skips
 
 
@@ -22,6 +23,7 @@ from replay.cli.process import method_options, show_skips
 @click.option("--serve", is_flag=True, help="Serve the recording (gRPC + web viewer) until Ctrl-C.")
 @click.option("--keyframes-only", is_flag=True, help="Skip the frames between keyframes.")
 @method_options
+@follow_options
 def replay(
     log: Path,
     save: Path | None,
@@ -33,12 +35,18 @@ def replay(
     n_r: int,
     n_l: int,
     seed: int,
+    follow: bool,
+    idle_timeout: float,
 ) -> None:
     """Stream every stage of LOG to Rerun: panorama, masks, bearings, cones, particles, map.
 
-    Without a target option it saves LOG's name with .rrd in the current folder.
+    Without a target option it saves LOG's name with .rrd in the current folder. With --follow,
+    LOG is still being written: movements are streamed as their chunks reach the disk, the
+    viewer follows the latest movement, and the command ends when LOG is finished (exit 0) or
+    idle for --idle-timeout seconds (exit 1).
     """
     from replay.cli.recording import viewer_command
+    from replay.follow import FollowedLog
     from replay.logs import ProcessableLog
     from replay.process import result_line
     from replay.records import MethodConfig
@@ -56,17 +64,21 @@ def replay(
     where = str(save) if save else connect
     target = RerunTarget(chosen[0] if chosen else "save", where)  # type: ignore[arg-type]
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
-    with ProcessableLog(log) as opened:  # a bad log fails here, before any output exists
-        rec, url = open_recording(log.stem, target)
+    # a bad log fails here, before any output exists
+    opened = FollowedLog(log, idle_timeout_s=idle_timeout) if follow else ProcessableLog(log)
+    with opened:
+        rec, url = open_recording(log.stem, target, live=follow)
         try:
             with show_skips():
-                doc = replay_log(opened, method, rec, images=not keyframes_only)
+                doc = replay_log(opened, method, rec, images=not keyframes_only, live=follow)
         finally:
             if not serve:
                 rec.disconnect()
     click.echo(f"{log}: {result_line(doc)}")
     if save:
         click.echo(f"wrote {save}; open it with: {viewer_command()} {save}")
+    if isinstance(opened, FollowedLog) and not serve:
+        end_of_follow(opened)
     if serve:
         import rerun as rr
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from replay.cli.recording import frame_options
+from replay.cli.recording import frame_options, live_options
 
 
 @click.command("simulate")
@@ -38,6 +38,7 @@ from replay.cli.recording import frame_options
     help="Run at FACTOR x real time (1 = real time); default as fast as possible.",
     metavar="FACTOR",
 )
+@live_options
 def simulate(
     scenario_arg: str,
     out: str,
@@ -48,6 +49,10 @@ def simulate(
     turn_noise: float,
     distance_noise: float,
     speed: float | None,
+    live: bool,
+    spawn: bool,
+    connect: str | None,
+    save_rrd: str | None,
 ) -> None:
     """Simulate a session: the same record loop as `bslam record`, in virtual time.
 
@@ -58,7 +63,7 @@ def simulate(
     from recorder.record import RecordSettings
     from recorder.sim.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
     from recorder.sim.simulate import SimSettings, simulate_to_file
-    from replay.cli.recording import run_recording
+    from replay.cli.recording import live_view, run_recording
 
     if scenario_arg in BUILTIN_SCENARIOS:
         scenario = builtin_scenario(scenario_arg)
@@ -82,4 +87,5 @@ def simulate(
             scenario, out, settings=settings, source=scenario_arg, progress=progress
         ),
         total=scenario.trajectory.n_moves,
+        live=live_view(live, spawn, connect, save_rrd),
     )
