@@ -40,6 +40,9 @@ MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEADER = struct.Struct("<BQ")
 
 FollowEnd = Literal["finished", "idle"]
+#: Default seconds without growth before following stops (the recorder closes a chunk at least
+#: every 0.5 s while it writes, and it writes while the robot moves or is polled).
+IDLE_TIMEOUT_S = 10.0
 
 
 class FollowedMessage(NamedTuple):
@@ -78,7 +81,7 @@ class LogFollower:
         self,
         path: str | os.PathLike[str],
         *,
-        idle_timeout_s: float = 10.0,
+        idle_timeout_s: float = IDLE_TIMEOUT_S,
         appear_timeout_s: float | None = None,
         poll_s: float = 0.05,
         monotonic: Callable[[], float] = time.monotonic,
