@@ -26,10 +26,11 @@ from collections.abc import Callable, Iterator
 from types import TracebackType
 from typing import Literal, NamedTuple
 
+from isal import isal_zlib
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, breakup_chunk
 
 from data_schemas.errors import LogError, NotMcapError
@@ -38,6 +39,12 @@ from data_schemas.errors import LogError, NotMcapError
 MAGIC = b"\x89MCAP0\r\n"
 #: Every record starts with its opcode and the length of its body (little-endian).
 _RECORD_HEADER = struct.Struct("<BQ")
+#: Chunk body up to its compression name: start and end time, records size, CRC, name length;
+#: the records' length (u64) follows the name.
+_CHUNK_HEAD = struct.Struct("<QQQII")
+_U64 = struct.Struct("<Q")
+#: Message body up to its data: channel id, sequence, log time, publish time.
+_MESSAGE_HEAD = struct.Struct("<HIQQ")
 
 FollowEnd = Literal["finished", "idle"]
 #: Default seconds without growth before following stops (the recorder closes a chunk at least
@@ -248,9 +255,10 @@ class LogFollower:
     def _chunk_messages(self, body: bytes) -> Iterator[FollowedMessage]:
         at = self._pos - len(body) - _RECORD_HEADER.size
         try:
-            chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
-            records = breakup_chunk(chunk, validate_crc=True)
-        except (McapError, CRCValidationError, struct.error, zlib.error) as exc:
+            records = _stored_records(body)
+            if records is None:  # a compressed chunk (another writer): mcap's reader
+                records = breakup_chunk(Chunk.read(ReadDataStream(io.BytesIO(body))), True)
+        except (McapError, CRCValidationError, struct.error, zlib.error, ValueError) as exc:
             raise LogError(
                 f"{self.name}: the chunk at byte {at} is damaged ({exc}); the chunks before it "
                 "were read"
@@ -269,3 +277,43 @@ class LogFollower:
                         f"{self.name}: a message in the chunk at byte {at} has no channel record"
                     )
                 yield FollowedMessage(topic, schema, record)
+
+
+def _stored_records(body: bytes) -> list[McapRecord] | None:
+    """Records of a stored (uncompressed) chunk, CRC-checked; None for a compressed chunk.
+
+    The recorder's chunks are stored (frames are PNG already). Splitting them here, CRC with
+    ISA-L and message data sliced out once, costs a third of mcap's record-by-record reader.
+
+    Raises
+    ------
+    ValueError
+        The CRC or a record length does not match.
+    """
+    _, _, size, crc, name_length = _CHUNK_HEAD.unpack_from(body)
+    if name_length:
+        return None
+    (length,) = _U64.unpack_from(body, _CHUNK_HEAD.size)
+    start = _CHUNK_HEAD.size + _U64.size
+    view = memoryview(body)[start : start + length]
+    if len(view) != length or length != size:
+        raise ValueError(f"records of {len(view)} bytes where the chunk says {size}")
+    if crc and isal_zlib.crc32(view) != crc:
+        raise ValueError("CRC mismatch")
+    out: list[McapRecord] = []
+    pos = 0
+    while pos < length:
+        opcode, n = _RECORD_HEADER.unpack_from(view, pos)
+        pos += _RECORD_HEADER.size
+        record = view[pos : pos + n]
+        pos += n
+        if len(record) != n:
+            raise ValueError("a record is cut short")
+        if opcode == Opcode.MESSAGE:
+            channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(record)
+            data = bytes(record[_MESSAGE_HEAD.size :])
+            out.append(Message(channel_id, log_time, data, publish_time, sequence))
+        elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
+            kind = Schema if opcode == Opcode.SCHEMA else Channel
+            out.append(kind.read(ReadDataStream(io.BytesIO(record))))
+    return out

@@ -154,3 +154,22 @@ def test_damaged_chunk_is_reported_after_the_good_ones(log: Path, tmp_path: Path
         for message in follower.messages():
             got.append(message)
     assert follower.chunk_count == 1 and got
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_chunks_of_another_writer_are_followed(tmp_path: Path, compression: str) -> None:
+    from mcap.writer import CompressionType, Writer
+
+    out = tmp_path / f"{compression}.mcap"
+    with out.open("wb") as f:
+        writer = Writer(f, chunk_size=200, compression=CompressionType[compression.upper()])
+        writer.start()
+        schema = writer.register_schema("s", "jsonschema", b"{}")
+        channel = writer.register_channel("/t", "json", schema)
+        for i in range(40):
+            writer.add_message(channel, log_time=i, data=b'{"i": %d}' % i, publish_time=i)
+        writer.finish()
+    with LogFollower(out, idle_timeout_s=1) as follower:
+        got = [(m.topic, m.schema, m.message.log_time, m.message.data) for m in follower.messages()]
+        assert follower.end == "finished" and follower.chunk_count > 3
+    assert got == [("/t", "s", i, b'{"i": %d}' % i) for i in range(40)]
