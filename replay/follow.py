@@ -19,7 +19,7 @@ from data_schemas.mcap.follow import IDLE_TIMEOUT_S, FollowEnd, LogFollower
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
 from recorder.logread import LogMessage
-from replay.logs import _check_calibration
+from replay.logs import _check_calibration, check_channel
 
 
 class FollowedLog:
@@ -72,8 +72,18 @@ class FollowedLog:
         return self._follower.end_line
 
     def messages(self, topics: Collection[str] | None = None) -> Iterator[LogMessage]:
-        """Messages of ``topics`` (all if None) as whole chunks arrive, until the log ends."""
+        """Messages of ``topics`` (all if None) as whole chunks arrive, until the log ends.
+
+        Raises
+        ------
+        UnknownSchemaError
+            A channel has a schema this version does not know (checked when it first appears).
+        """
+        checked: set[tuple[str, str]] = set()
         for topic, schema, message in self._follower.messages():
+            if (topic, schema) not in checked:
+                check_channel(self.name, topic, schema)
+                checked.add((topic, schema))
             if topics is None or topic in topics:
                 yield LogMessage(
                     topic,

@@ -47,6 +47,24 @@ def _check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:
         )
 
 
+def check_channel(name: str, topic_name: str, schema_name: str) -> None:
+    """Raise UnknownSchemaError if this version cannot read ``topic_name`` with that schema."""
+    try:
+        schema_dict(schema_name)
+    except UnknownSchemaError:
+        raise UnknownSchemaError(
+            f"{name}: channel {topic_name} has schema {schema_name!r}, which this "
+            "version of bearing-slam does not know; upgrade bearing-slam"
+        ) from None
+    known = TOPICS.get(topic_name)
+    allowed = IMAGE_SCHEMAS if topic_name == "/camera/panorama" else (known and known.schema,)
+    if known is not None and schema_name not in allowed:
+        raise UnknownSchemaError(
+            f"{name}: channel {topic_name} has schema {schema_name!r}, expected "
+            f"{' or '.join(str(a) for a in allowed)}"
+        )
+
+
 class ProcessableLog:
     """A finished log with valid session metadata and only known schemas.
 
@@ -93,23 +111,10 @@ class ProcessableLog:
     def _check_schemas(self) -> None:
         for topic_name, schema_name in self.topics.items():
             try:
-                schema_dict(schema_name)
+                check_channel(self.name, topic_name, schema_name)
             except UnknownSchemaError:
                 self.close()
-                raise UnknownSchemaError(
-                    f"{self.name}: channel {topic_name} has schema {schema_name!r}, which this "
-                    "version of bearing-slam does not know; upgrade bearing-slam"
-                ) from None
-            known = TOPICS.get(topic_name)
-            allowed = (
-                IMAGE_SCHEMAS if topic_name == "/camera/panorama" else (known and known.schema,)
-            )
-            if known is not None and schema_name not in allowed:
-                self.close()
-                raise UnknownSchemaError(
-                    f"{self.name}: channel {topic_name} has schema {schema_name!r}, expected "
-                    f"{' or '.join(str(a) for a in allowed)}"
-                )
+                raise
 
     def messages(
         self,

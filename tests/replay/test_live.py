@@ -13,6 +13,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from replay.cli import cli
@@ -135,3 +137,42 @@ def test_live_options_are_checked() -> None:
     assert result.exit_code == 2 and "--spawn shows a live view: add --live" in result.output
     result = CliRunner().invoke(cli, ["process", "a.mcap", "b.mcap", "--follow"])
     assert result.exit_code == 2 and "--follow takes one LOG" in result.output
+
+
+def _entities(rrd: Path) -> set[str]:
+    import rerun as rr
+
+    return {chunk.entity_path for chunk in rr.chunk.RrdReader(rrd).stream()}
+
+
+def test_live_rerun_recording_has_the_offline_entities(tmp_path: Path) -> None:
+    out, live_rrd, offline_rrd = tmp_path / "s.mcap", tmp_path / "live.rrd", tmp_path / "off.rrd"
+    live = _simulate(out, "--speed", "8", "--live", "--save", str(live_rrd))
+    _, err = live.communicate(timeout=120)
+    assert live.returncode == 0, err
+    result = CliRunner().invoke(cli, ["replay", str(out), "--save", str(offline_rrd)])
+    assert result.exit_code == 0, result.output
+    entities = _entities(live_rrd)
+    assert entities == _entities(offline_rrd)
+    assert {"camera/panorama", "map/estimates", "fr/cones/L3"} <= {e.strip("/") for e in entities}
+
+
+def test_record_live_on_a_pty_robot(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    from recorder.clock import SystemClock
+    from recorder.sim.fake_khepera import FakeKhepera
+    from tests.replay.test_cli_record_info import _inputs
+
+    inputs = _inputs(tmp_path)
+    out = tmp_path / "rec.mcap"
+    fake = FakeKhepera(SystemClock(), np.random.default_rng(0))
+    with fake.serve_pty() as server:
+        args = ["record", "--port", server.path, "--camera", inputs["camera"], "--out", str(out)]
+        args += ["--calibration", inputs["cal"], "--landmarks", inputs["lms"], "--moves", "2"]
+        args += ["--distance", "0.02", "--turn-deg", "10", "--rate", "20", "--live"]
+        result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    assert "wrote" in result.stdout and "2 movements" in result.stdout
+    assert "live view stopped" not in result.stderr
+    follower_err = capfd.readouterr().err  # the follower process writes to the terminal itself
+    assert "rec.mcap: movement 1 skipped" in follower_err  # random frames: no landmark seen
+    assert f"{out} is finished (footer written)" in follower_err
