@@ -1,9 +1,12 @@
 """The offline stages: decode -> bearings -> FR initialization -> change of frame -> FL fusion.
 
 :func:`run_log` streams one log through the stages in log-time order and hands typed records
-(:mod:`replay.records`) to sinks. Frames are decoded only where a sink needs them (keyframes
-for the estimate; every frame for Rerun). A movement is processed when its end keyframe
-arrives; one that cannot be used (missing keyframe, reference landmark not visible, degenerate
+(:mod:`replay.records`) to sinks. It reads frames, ``/robot/movement`` and the simulator's
+truth in one pass, as they come, so a finished log (:class:`replay.logs.ProcessableLog`) and a
+log still being written (:class:`replay.follow.FollowedLog`) go through the same code. Frames
+are decoded only where a sink needs them (keyframes for the estimate; every frame for Rerun).
+A movement is processed once its end keyframe and its end message have arrived; one that
+cannot be used (missing keyframe, reference landmark not visible, degenerate
 geometry) is skipped with its reason and processing goes on; the reason is in the movement's
 record (so in the summary) and is logged as a warning on the ``bslam.replay`` logger, which
 prints nothing unless the application configures it (the CLI does for one log).

@@ -162,7 +162,8 @@ class LogFollower:
         if self.end == "idle":
             return (
                 f"{self.name} has not grown for {self.idle_timeout_s:g} s: stopped following "
-                f"after {self.chunk_count} chunks (was the recorder stopped or killed? "
+                f"after {self.chunk_count} chunk{'' if self.chunk_count == 1 else 's'} (was the "
+                "recorder stopped or killed? "
                 "`bslam recover` indexes an unfinished log)"
             )
         return ""

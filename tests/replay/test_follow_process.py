@@ -107,3 +107,21 @@ def test_followed_channel_with_an_unknown_schema_is_one_line(
         process_log(opened, METHOD)
     assert str(live.value) == str(offline.value)
     assert "/robot/movement has schema 'bslam.Nope'" in str(live.value)
+
+
+def test_replay_follow_of_an_interrupted_log_saves_what_it_read(
+    small_log: Path, tmp_path: Path
+) -> None:
+    from click.testing import CliRunner
+
+    from replay.cli import cli
+
+    data = small_log.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: data.rindex(b"\x0f")])  # up to the data end record: no footer
+    rrd = tmp_path / "cut.rrd"
+    args = ["replay", str(cut), "--follow", "--idle-timeout", "0.3", "--save", str(rrd)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1
+    assert "cut.mcap has not grown for 0.3 s: stopped following after 1 chunk " in result.stderr
+    assert "3/3 movements used" in result.stdout and rrd.stat().st_size > 0

@@ -101,7 +101,7 @@ def test_killed_recording_ends_the_follower_with_a_clear_line(tmp_path: Path) ->
 def test_killing_the_live_follower_does_not_disturb_the_recording(tmp_path: Path) -> None:
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
-    live = _simulate(tmp_path / "a" / "s.mcap", "--speed", "3", "--live")
+    live = _simulate(tmp_path / "a" / "s.mcap", "--speed", "6", "--live")
     deadline = time.monotonic() + 20
     follower: list[tuple[int, str]] = []
     while not follower and time.monotonic() < deadline and live.poll() is None:
@@ -121,7 +121,7 @@ def test_killing_the_live_follower_does_not_disturb_the_recording(tmp_path: Path
 
 def test_live_terminal_view_follows_to_the_end(tmp_path: Path) -> None:
     out = tmp_path / "view.mcap"
-    live = _simulate(out, "--speed", "8", "--live")
+    live = _simulate(out, "--speed", "12", "--live")
     stdout, err = live.communicate(timeout=60)
     assert live.returncode == 0, err
     lines = [line for line in err.splitlines() if line.startswith("view.mcap: movement ")]
@@ -147,7 +147,7 @@ def _entities(rrd: Path) -> set[str]:
 
 def test_live_rerun_recording_has_the_offline_entities(tmp_path: Path) -> None:
     out, live_rrd, offline_rrd = tmp_path / "s.mcap", tmp_path / "live.rrd", tmp_path / "off.rrd"
-    live = _simulate(out, "--speed", "8", "--live", "--save", str(live_rrd))
+    live = _simulate(out, "--speed", "20", "--live", "--save", str(live_rrd))
     _, err = live.communicate(timeout=120)
     assert live.returncode == 0, err
     result = CliRunner().invoke(cli, ["replay", str(out), "--save", str(offline_rrd)])
