@@ -69,3 +69,32 @@ class VirtualClock:
         if dt_ns > 0:
             with self._lock:
                 self._elapsed_ns += dt_ns
+
+
+class PacedClock(VirtualClock):
+    """Simulated time that runs at most ``speed`` times as fast as real time.
+
+    Time still moves only when someone sleeps, exactly as with :class:`VirtualClock` (so a
+    simulated log holds the same messages at any speed); each sleep then also waits, in real
+    time, until ``speed`` x the real seconds since the clock was made catch up with the simulated
+    seconds. A follower thus sees the log grow as it would during a recording at that speed.
+
+    Parameters
+    ----------
+    speed : float
+        Simulated seconds per real second (> 0): 1 is real time, 4 four times as fast.
+    """
+
+    def __init__(self, speed: float, start_wall_ns: int = 1_700_000_000 * 1_000_000_000) -> None:
+        if not speed > 0:
+            raise ValueError(f"speed must be > 0, got {speed}")
+        super().__init__(start_wall_ns)
+        self.speed = float(speed)
+        self._t0 = time.monotonic()
+
+    def advance_ns(self, dt_ns: int) -> None:
+        super().advance_ns(dt_ns)
+        due = self._t0 + self.monotonic_ns() / 1e9 / self.speed
+        wait = due - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)

@@ -15,13 +15,16 @@ import rerun.blueprint as rrb
 from replay.sinks.rerun_sink import MOVEMENT
 
 
-def method_blueprint(*, fig1_priors: tuple[str, ...] = ()) -> rrb.Blueprint:
+def method_blueprint(*, fig1_priors: tuple[str, ...] = (), live: bool = False) -> rrb.Blueprint:
     """The default blueprint of ``bslam replay`` and ``bslam demo``.
 
     Parameters
     ----------
     fig1_priors : tuple of str
         Names under ``fig1/density/`` to show side by side on the "Fig. 1" tab (none: no tab).
+    live : bool
+        Follow the latest movement as it arrives (``bslam replay --follow``): the time panel
+        is set to "following" on the movement timeline.
     """
     method = rrb.Horizontal(
         rrb.Vertical(
@@ -58,5 +61,7 @@ def method_blueprint(*, fig1_priors: tuple[str, ...] = ()) -> rrb.Blueprint:
         rrb.Tabs(*parts),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(timeline=MOVEMENT, state="collapsed"),
+        rrb.TimePanel(
+            timeline=MOVEMENT, state="collapsed", play_state="following" if live else None
+        ),
     )

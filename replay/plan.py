@@ -1,13 +1,15 @@
 """The movements of a log: which frames are keyframes, and the simulator's true poses.
 
 ``/robot/movement`` has a ``start`` and an ``end`` message per straight movement; each points at
-its keyframe through ``keyframe_timestamp``, equal to that frame's ``timestamp``.
+its keyframe through ``keyframe_timestamp``, equal to that frame's ``timestamp``. The plan grows
+message by message (:meth:`MovementPlan.add`), so a log can be followed while it is written.
 """
 
 from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +19,7 @@ from data_schemas.stamps import ns_from_stamp
 
 MOVEMENT_TOPIC = "/robot/movement"
 TRUTH_TOPIC = "/sim/ground_truth"
+PLAN_TOPICS = (MOVEMENT_TOPIC, TRUTH_TOPIC)
 PHASES = ("start", "end")
 
 
@@ -30,13 +33,34 @@ class MovementPlan:
         Keyframe ``timestamp`` of each phase that was logged.
     truth_times_ns : list of int
         Sorted ``/sim/ground_truth`` time stamps (empty for a real log).
-    truth_poses : (n, 3) float
-        Matching ``x, y, heading`` (m, m, rad; world frame).
+    truth_poses : list of (x, y, heading)
+        Matching poses (m, m, rad; world frame).
     """
 
     keyframes: dict[int, dict[str, int]] = field(default_factory=dict)
     truth_times_ns: list[int] = field(default_factory=list)
-    truth_poses: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    truth_poses: list[tuple[float, float, float]] = field(default_factory=list)
+
+    def add(self, topic: str, doc: dict[str, Any]) -> tuple[int, str, int] | None:
+        """Take one message of :data:`PLAN_TOPICS` (decoded).
+
+        Returns
+        -------
+        (index, phase, keyframe_ns) or None
+            For a movement message: the movement, its phase and its keyframe's time stamp.
+        """
+        if topic == MOVEMENT_TOPIC:
+            index, phase = int(doc["index"]), str(doc["phase"])
+            t_ns = self.keyframes.setdefault(index, {})[phase] = ns_from_stamp(
+                doc["keyframe_timestamp"]
+            )
+            return index, phase, t_ns
+        if topic == TRUTH_TOPIC:
+            t_ns = ns_from_stamp(doc["timestamp"])
+            i = bisect.bisect_right(self.truth_times_ns, t_ns)
+            self.truth_times_ns.insert(i, t_ns)
+            self.truth_poses.insert(i, (float(doc["x"]), float(doc["y"]), float(doc["heading"])))
+        return None
 
     def keys_at(self) -> dict[int, list[tuple[int, str]]]:
         """Frame time stamp -> the (index, phase) keyframes it is."""
@@ -51,24 +75,12 @@ class MovementPlan:
         i = bisect.bisect_right(self.truth_times_ns, t_ns) - 1
         if i < 0:
             return None
-        pos: NDArray[np.float64] = self.truth_poses[i, :2].copy()
-        return pos
+        return np.array(self.truth_poses[i][:2], np.float64)
 
 
 def read_plan(log: ProcessableLog) -> MovementPlan:
     """Read ``/robot/movement`` and ``/sim/ground_truth`` (small channels) in one pass."""
     plan = MovementPlan()
-    times: list[int] = []
-    poses: list[tuple[float, float, float]] = []
-    for msg in log.messages([MOVEMENT_TOPIC, TRUTH_TOPIC]):
-        doc = msg.decode()
-        if msg.topic == MOVEMENT_TOPIC:
-            phases = plan.keyframes.setdefault(int(doc["index"]), {})
-            phases[str(doc["phase"])] = ns_from_stamp(doc["keyframe_timestamp"])
-        else:
-            times.append(ns_from_stamp(doc["timestamp"]))
-            poses.append((float(doc["x"]), float(doc["y"]), float(doc["heading"])))
-    order = np.argsort(times, kind="stable")
-    plan.truth_times_ns = [times[i] for i in order]
-    plan.truth_poses = np.array(poses, np.float64).reshape(-1, 3)[order]
+    for msg in log.messages(PLAN_TOPICS):
+        plan.add(msg.topic, msg.decode())
     return plan

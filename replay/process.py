@@ -14,7 +14,7 @@ from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.outputs import OutputGuard
 from replay.records import MethodConfig, Sink
 from replay.sinks.summary import SummarySink
-from replay.stages import run_log
+from replay.stages import MessageLog, run_log
 
 _LOG = logging.getLogger("bslam.logs")
 _FLAT_LIST = re.compile(r"\[\s+([^\[\]{}]*?)\s+\]")
@@ -45,7 +45,7 @@ def open_log(log: str | os.PathLike[str], *, skip_corrupt: bool = False) -> Proc
 
 
 def process_log(
-    log: str | os.PathLike[str] | ProcessableLog,
+    log: str | os.PathLike[str] | MessageLog,
     method: MethodConfig,
     *,
     out: str | os.PathLike[str] | None = None,
@@ -58,8 +58,8 @@ def process_log(
 
     Parameters
     ----------
-    log : path or ProcessableLog
-        A finished bearing-slam log (a path, or one already opened).
+    log : path, ProcessableLog or FollowedLog
+        A finished bearing-slam log (a path, or one already opened), or a log being followed.
     method : MethodConfig
         Prior, particle counts and seed.
     out : path, optional
@@ -79,7 +79,7 @@ def process_log(
         An output is the log (or a link to it), exists without ``force``, or cannot be written;
         checked before anything is read.
     """
-    source = log.path if isinstance(log, ProcessableLog) else Path(log)
+    source = Path(log) if isinstance(log, str | os.PathLike) else log.path
     guard = OutputGuard([source], force=force)
     for path, what in ((out, "derived log"), (summary, "summary")):
         if path is not None:
@@ -88,9 +88,9 @@ def process_log(
     sinks: list[Sink] = [summary_sink, *extra_sinks]
     with contextlib.ExitStack() as stack:
         opened = (
-            log
-            if isinstance(log, ProcessableLog)
-            else stack.enter_context(open_log(log, skip_corrupt=skip_corrupt))
+            stack.enter_context(open_log(log, skip_corrupt=skip_corrupt))
+            if isinstance(log, str | os.PathLike)
+            else log
         )
         if out is not None:
             from replay.sinks.derived import DerivedLogSink  # the MCAP writer only when asked

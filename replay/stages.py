@@ -1,9 +1,13 @@
 """The offline stages: decode -> bearings -> FR initialization -> change of frame -> FL fusion.
 
 :func:`run_log` streams one log through the stages in log-time order and hands typed records
-(:mod:`replay.records`) to sinks. Frames are decoded only where a sink needs them (keyframes
-for the estimate; every frame for Rerun). A movement is processed when its end keyframe
-arrives; one that cannot be used (missing keyframe, reference landmark not visible, degenerate
+(:mod:`replay.records`) to sinks. It reads frames, ``/robot/movement`` and the simulator's
+truth in one pass, as they come, so a finished log
+(:class:`data_schemas.mcap.processable.ProcessableLog`) and a log still being written
+(:class:`replay.follow.FollowedLog`) go through the same code. Frames are decoded only where a
+sink needs them (keyframes for the estimate; every frame for Rerun).
+A movement is processed once its end keyframe and its end message have arrived; one that
+cannot be used (missing keyframe, reference landmark not visible, degenerate
 geometry) is skipped with its reason and processing goes on; the reason is in the movement's
 record (so in the summary) and is logged as a warning on the ``bslam.replay`` logger, which
 prints nothing unless the application configures it (the CLI does for one log).
@@ -13,9 +17,10 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 import pybase64
@@ -23,11 +28,12 @@ from numpy.typing import NDArray
 
 from data_schemas.errors import ImageError
 from data_schemas.mcap.processable import ProcessableLog
+from data_schemas.mcap.read import LogMessage
 from data_schemas.session import Session
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import BearingExtractor, Detection, decode_frame
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
-from replay.plan import MovementPlan, read_plan
+from replay.plan import PLAN_TOPICS, MovementPlan
 from replay.records import (
     EstimateRecord,
     FrameRecord,
@@ -39,6 +45,10 @@ from replay.records import (
 from replay.truth import Truth, truth_from_scenario
 
 CAMERA_TOPIC = "/camera/panorama"
+#: what the runner reads, in log order: frames, the movement plan, the simulator's truth
+STREAM_TOPICS = (CAMERA_TOPIC, *PLAN_TOPICS)
+#: handled frames kept in case a movement message names one after a later frame
+_RECENT_FRAMES = 8
 CREDIBLE_P = 0.8
 
 logger = logging.getLogger("bslam.replay")
@@ -90,23 +100,44 @@ class _Keyframe:
 
 @dataclass
 class _State:
-    """Keyframes seen so far, and which movements are done."""
+    """Keyframes seen so far, which movements are done, and frames not yet handled.
+
+    A frame is held (``pending``) until the next message says whether it is a keyframe: the
+    recorder writes a movement message right after its keyframe, before the next frame.
+    """
 
     keyframes: dict[tuple[int, str], _Keyframe] = field(default_factory=dict)
     done: set[int] = field(default_factory=set)
     last_log_time_ns: int = 0
     last_timestamp_ns: int = 0
+    keys_at: dict[int, list[tuple[int, str]]] = field(default_factory=dict)
+    pending: LogMessage | None = None
+    recent: dict[int, LogMessage] = field(default_factory=dict)
+
+
+class MessageLog(Protocol):
+    """What the runner reads: a log's name, its session, its messages in log-time order.
+
+    :class:`data_schemas.mcap.processable.ProcessableLog` (a finished log) and
+    :class:`replay.follow.FollowedLog` (a log still being written) are both one.
+    """
+
+    name: str
+    path: Path
+    session: Session
+
+    def messages(self, topics: Collection[str] | None = None) -> Iterator[LogMessage]: ...
 
 
 class Runner:
     """One log through the stages to the sinks (see :func:`run_log`)."""
 
-    def __init__(self, log: ProcessableLog, method: MethodConfig, sinks: Sequence[Sink]) -> None:
+    def __init__(self, log: MessageLog, method: MethodConfig, sinks: Sequence[Sink]) -> None:
         self.log = log
         self.session: Session = log.session
         self.method = method
         self.sinks = list(sinks)
-        self.plan: MovementPlan = read_plan(log)
+        self.plan = MovementPlan()
         scenario = self.session.scenario
         self.truth: Truth | None = (
             truth_from_scenario(scenario, self.session.reference) if scenario else None
@@ -130,26 +161,63 @@ class Runner:
         for sink in self.sinks:
             sink.start(info)
         try:
-            self._frames()
+            for msg in self.log.messages(STREAM_TOPICS):
+                self._message(msg)
+            self._settle()
+            for index in sorted(self.plan.keyframes):
+                if index not in self.state.done:
+                    self._movement(index)
         finally:
             for sink in self.sinks:
                 sink.finish()
 
-    def _frames(self) -> None:
-        keys_at = self.plan.keys_at()
-        # a frame's publish time is its timestamp: without all frames, read only keyframes
-        only = None if self.all_frames else keys_at
-        for msg in self.log.messages([CAMERA_TOPIC], publish_times_ns=only):
-            doc = msg.decode()
-            t_ns = ns_from_stamp(doc["timestamp"])
-            keys = keys_at.get(t_ns, [])
-            self.state.last_log_time_ns, self.state.last_timestamp_ns = msg.log_time_ns, t_ns
-            if not keys and not self.all_frames:
-                continue
-            self._frame(doc, t_ns, msg.log_time_ns, keys)
-        for index in sorted(self.plan.keyframes):
-            if index not in self.state.done:
-                self._movement(index)
+    def _message(self, msg: LogMessage) -> None:
+        """One message in log order: hold a frame, grow the plan, run a finished movement."""
+        if msg.topic == CAMERA_TOPIC:
+            self._settle()
+            self.state.pending = msg
+            return
+        movement = self.plan.add(msg.topic, msg.decode())
+        if movement is None:
+            return
+        index, phase, t_ns = movement
+        keys = self.state.keys_at.setdefault(t_ns, [])
+        if (index, phase) not in keys:
+            keys.append((index, phase))
+        pending = self.state.pending
+        if pending is not None and pending.publish_time_ns == t_ns:
+            self._settle()  # the recorder's order: keyframe, then its movement message
+        elif t_ns in self.state.recent:
+            self._late_keyframe(index, phase, self.state.recent[t_ns])
+
+    def _settle(self) -> None:
+        """Handle the held frame, now that the plan says whether it is a keyframe."""
+        msg, self.state.pending = self.state.pending, None
+        if msg is None:
+            return
+        # a frame's publish time is its timestamp: without all frames, decode only keyframes
+        t_ns = msg.publish_time_ns
+        self.state.recent[t_ns] = msg
+        if len(self.state.recent) > _RECENT_FRAMES:
+            del self.state.recent[next(iter(self.state.recent))]
+        keys = self.state.keys_at.get(t_ns, [])
+        if not keys and not self.all_frames:
+            return
+        self.state.last_log_time_ns, self.state.last_timestamp_ns = msg.log_time_ns, t_ns
+        doc = msg.decode()
+        self._frame(doc, ns_from_stamp(doc["timestamp"]), msg.log_time_ns, keys)
+
+    def _late_keyframe(self, index: int, phase: str, msg: LogMessage) -> None:
+        """A movement message naming a frame handled before it (not the recorder's order)."""
+        if index in self.state.done or (index, phase) in self.state.keyframes:
+            return
+        image, _ = decode_image(msg.decode())
+        detections = self.extractor.extract(image)
+        self.state.keyframes[(index, phase)] = _Keyframe(
+            msg.publish_time_ns, msg.log_time_ns, detections
+        )
+        if phase == "end":
+            self._movement(index)
 
     def _frame(
         self, doc: dict[str, Any], t_ns: int, log_time_ns: int, keys: list[tuple[int, str]]
@@ -245,13 +313,13 @@ class Runner:
 
 
 def run_log(
-    log: str | os.PathLike[str] | ProcessableLog, method: MethodConfig, sinks: Sequence[Sink]
+    log: str | os.PathLike[str] | MessageLog, method: MethodConfig, sinks: Sequence[Sink]
 ) -> None:
-    """Run one log (a path, or a log already opened) through the stages into ``sinks``.
+    """Run one log (a path, or a log already opened or followed) through the stages into ``sinks``.
 
     Each sink's ``finish`` is called, also after an error. A path is opened and closed here.
     """
-    if isinstance(log, ProcessableLog):
+    if not isinstance(log, str | os.PathLike):
         Runner(log, method, sinks).run()
         return
     with ProcessableLog(log) as opened:

@@ -38,7 +38,8 @@ from data_schemas.registry import IMAGE_SCHEMAS, SESSION_METADATA_NAME, TOPICS, 
 from data_schemas.session import Session, session_from_metadata
 
 
-def _check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:
+def check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:
+    """Raise MissingMetadataError unless ``metadata`` holds a session with a camera calibration."""
     record = metadata.get(SESSION_METADATA_NAME)
     if record is None:
         raise MissingMetadataError(
@@ -55,6 +56,39 @@ def _check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:
             f"{name}: the session metadata has no camera calibration, so frames cannot be "
             "turned into bearings; record with a calibrated camera"
         )
+
+
+def check_channel(name: str, topic_name: str, schema_name: str) -> str | None:
+    """Check one channel of log ``name``: None if it is used, a note if it is foreign.
+
+    A channel on one of our topics must carry that topic's schema; a channel whose schema this
+    version does not know on a topic that is not ours is another tool's and is ignored.
+
+    Raises
+    ------
+    UnknownSchemaError
+        One of our topics with an unknown or wrong schema.
+    """
+    known = TOPICS.get(topic_name)
+    try:
+        schema_dict(schema_name)
+    except UnknownSchemaError:
+        if known is None:
+            return (
+                f"{name}: channel {topic_name} (schema {schema_name!r}) is not bearing-slam's: "
+                "ignored"
+            )
+        raise UnknownSchemaError(
+            f"{name}: channel {topic_name} has schema {schema_name!r}, which this "
+            "version of bearing-slam does not know; upgrade bearing-slam"
+        ) from None
+    allowed = IMAGE_SCHEMAS if topic_name == "/camera/panorama" else (known and known.schema,)
+    if known is not None and schema_name not in allowed:
+        raise UnknownSchemaError(
+            f"{name}: channel {topic_name} has schema {schema_name!r}, expected "
+            f"{' or '.join(str(a) for a in allowed)}"
+        )
+    return None
 
 
 def _summary(file: IO[bytes]) -> Summary | None:
@@ -120,7 +154,7 @@ class ProcessableLog:
             metadata = self._indexed_metadata()
         else:
             schemas, channels, metadata = self._scanned(skip_corrupt)
-        _check_calibration(self.name, metadata)
+        check_calibration(self.name, metadata)
         try:
             self.session: Session = session_from_metadata(metadata[SESSION_METADATA_NAME])
         except MissingMetadataError as exc:
@@ -185,28 +219,11 @@ class ProcessableLog:
         return scan.schemas, scan.channels, metadata
 
     def _usable(self, topic_name: str, schema_name: str) -> bool:
-        """Whether a channel is used: a known schema on its topic; raise for a wrong one."""
-        known = TOPICS.get(topic_name)
-        try:
-            schema_dict(schema_name)
-        except UnknownSchemaError:
-            if known is None:
-                self.notes.append(
-                    f"{self.name}: channel {topic_name} (schema {schema_name!r}) is not "
-                    "bearing-slam's: ignored"
-                )
-                return False
-            raise UnknownSchemaError(
-                f"{self.name}: channel {topic_name} has schema {schema_name!r}, which this "
-                "version of bearing-slam does not know; upgrade bearing-slam"
-            ) from None
-        allowed = IMAGE_SCHEMAS if topic_name == "/camera/panorama" else (known and known.schema,)
-        if known is not None and schema_name not in allowed:
-            raise UnknownSchemaError(
-                f"{self.name}: channel {topic_name} has schema {schema_name!r}, expected "
-                f"{' or '.join(str(a) for a in allowed)}"
-            )
-        return True
+        """Whether a channel is used (see :func:`check_channel`); a foreign one is noted."""
+        note = check_channel(self.name, topic_name, schema_name)
+        if note is not None:
+            self.notes.append(note)
+        return note is None
 
     def messages(
         self,

@@ -695,7 +695,8 @@ class LogScan:
             elif stop - start == RECORD_HEADER.size + 4 and self._verified(stop):
                 what = "data end"  # its 13 bytes hold no data
             loses = what == "record"
-            if cut and stop == self._size and what == "record" and start > len(MAGIC):
+            torn_end = cut and stop == self._size and start > len(MAGIC)
+            if torn_end and what in ("record", "message index"):
                 self.trailing_bytes = stop - start
                 what, detail = "file end", detail or "cut off inside a record"
             self.damage.append(

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from data_schemas.session import LandmarkSpec
-from recorder.clock import VirtualClock
+from recorder.clock import PacedClock, VirtualClock
 from recorder.record import (
     CommandSink,
     Progress,
@@ -45,11 +45,15 @@ class SimSettings:
         Frame rate while driving (virtual time), encoding, PNG level.
     turn_noise, distance_noise : float
         Actuation noise of the simulated robot: relative std of each turn / straight distance.
+    speed : float or None
+        Run at most this many times as fast as real time (:class:`~recorder.clock.PacedClock`),
+        e.g. to follow the log live; None: as fast as possible. The log's messages are the same.
     """
 
     record: RecordSettings = field(default_factory=RecordSettings)
     turn_noise: float = 0.02
     distance_noise: float = 0.02
+    speed: float | None = None
 
 
 def simulate_to_file(
@@ -86,7 +90,7 @@ def simulate_to_file(
         np.random.default_rng(seq)
         for seq in np.random.SeedSequence(scenario.trajectory.seed).spawn(3)
     )
-    base = VirtualClock()
+    base = VirtualClock() if s.speed is None else PacedClock(s.speed)
     clock = EpochClock(base)
     fake = FakeKhepera(
         base,

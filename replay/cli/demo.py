@@ -64,9 +64,7 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool) -> None:
         staged=True,
     )
     with show_skips():
-        doc = save_rrd(
-            log, MethodConfig(seed=seed), rrd, out=derived, summary=summary, force=force
-        )
+        doc = save_rrd(log, MethodConfig(seed=seed), rrd, out=derived, summary=summary, force=force)
     click.echo(f"map: {result_line(doc)}")
     for name, est in doc["landmarks"].items():
         x, y = est["mean"]

@@ -11,8 +11,11 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from replay.cli.follow import end_of_follow, follow_options
+
 if TYPE_CHECKING:
     from replay.batch import LogJob
+    from replay.records import MethodConfig
 
 PRIOR_CHOICES = ("impartial", "gaussian", "mixture")
 
@@ -114,6 +117,7 @@ def show_skips() -> Iterator[None]:
     is_flag=True,
     help="Process a corrupt log without its damaged chunks (warned) instead of refusing it.",
 )
+@follow_options
 def process(
     logs: tuple[str, ...],
     out: Path | None,
@@ -126,6 +130,8 @@ def process(
     scheduler: str | None,
     force: bool,
     skip_corrupt: bool,
+    follow: bool,
+    idle_timeout: float,
 ) -> None:
     """Process LOGS (files, folders or globs) into maps.
 
@@ -133,12 +139,19 @@ def process(
     in FL. With one log and neither --out nor --summary, the summary JSON goes to stdout, and
     each skipped movement is reported on stderr. Several logs run in parallel with one result
     line per log (skips are counted there); one failing log is reported and the others go on.
+
+    With --follow, LOG (one file) is still being written: each movement is processed once its
+    whole chunk is on disk, a compact view of the map is updated in place on stderr, and the
+    command ends when LOG is finished (exit 0) or idle for --idle-timeout seconds (exit 1).
     """
     from replay.batch import expand_logs, plan_jobs
     from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
 
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
+    if follow:
+        _process_followed(logs, out, summary, method, idle_timeout, scheduler, force)
+        return
     paths = expand_logs(logs)
     if len(paths) == 1 and scheduler is None:
         with show_skips():
@@ -152,6 +165,33 @@ def process(
         return
     jobs = plan_jobs(paths, out, summary, method, force=force, skip_corrupt=skip_corrupt)
     _process_many(jobs, workers, scheduler)
+
+
+def _process_followed(
+    logs: tuple[str, ...],
+    out: Path | None,
+    summary: Path | None,
+    method: MethodConfig,
+    idle_timeout: float,
+    scheduler: str | None,
+    force: bool,
+) -> None:
+    """One log followed while it is written, with the terminal view on stderr."""
+    from replay.follow import FollowedLog
+    from replay.process import dumps, process_log, result_line
+    from replay.sinks.terminal import TerminalView
+
+    if len(logs) != 1 or scheduler is not None:
+        raise click.UsageError("--follow takes one LOG file (and no --scheduler)")
+    with FollowedLog(logs[0], idle_timeout_s=idle_timeout) as log:
+        doc = process_log(
+            log, method, out=out, summary=summary, extra_sinks=(TerminalView(),), force=force
+        )
+    if out is None and summary is None:
+        click.echo(dumps(doc))
+    else:
+        click.echo(f"{logs[0]}: {result_line(doc)}")
+    end_of_follow(log)
 
 
 def _process_many(jobs: list[LogJob], workers: int, scheduler: str | None) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from replay.cli.recording import frame_options
+from replay.cli.recording import frame_options, live_options
 
 
 def _distance_range(text: str) -> tuple[float, float]:
@@ -70,6 +70,7 @@ def _distance_range(text: str) -> tuple[float, float]:
 @click.option(
     "--wheel-base", type=float, default=0.053, show_default=True, help="Wheel base, metres."
 )
+@live_options
 def record(
     port: str,
     camera_source: str,
@@ -89,6 +90,10 @@ def record(
     model: str,
     mm_per_pulse: float,
     wheel_base: float,
+    live: bool,
+    spawn: bool,
+    connect: str | None,
+    save_rrd: str | None,
 ) -> None:
     """Record a session: turn, keyframe, drive while capturing, keyframe; MOVES times.
 
@@ -105,9 +110,10 @@ def record(
     from recorder.robot import KheperaRobot, RobotConfig
     from recorder.session import build_session_doc, load_calibration_file, load_landmark_file
     from recorder.timebase import EpochClock
-    from replay.cli.recording import claim_log, run_recording
+    from replay.cli.recording import claim_log, live_view, run_recording
 
     distance_m = _distance_range(distance)
+    view = live_view(live, spawn, connect, save_rrd)
     cal = load_calibration_file(calibration)
     catalog = load_landmark_file(landmarks)
     config = RobotConfig(
@@ -149,6 +155,7 @@ def record(
                 total=moves or None,
                 force=force,
                 inputs=[calibration, landmarks],
+                live=view,
             )
     finally:
         camera.close()

@@ -13,8 +13,11 @@ import click
 
 if TYPE_CHECKING:
     from recorder.record import Progress, RecordResult
+    from replay.live import LiveView
 
 F = TypeVar("F", bound=Callable[..., Any])
+#: After the recording, how long to let the live view read to the end of the log (seconds).
+LIVE_WAIT_S = 60.0
 
 
 def frame_options(func: F) -> F:
@@ -75,6 +78,53 @@ def claim_log(
     OutputGuard(inputs, force=force).claim(out, what="log")
 
 
+def live_options(func: F) -> F:
+    """``--live`` and its Rerun targets ``--spawn``, ``--connect URL``, ``--save X.rrd``."""
+    for option in reversed(
+        (
+            click.option(
+                "--live",
+                is_flag=True,
+                help="Show the map while recording, from a separate follower process: a compact "
+                "terminal view, or Rerun with --spawn, --connect or --save.",
+            ),
+            click.option("--spawn", is_flag=True, help="With --live: start a Rerun viewer."),
+            click.option(
+                "--connect",
+                metavar="URL",
+                help="With --live: stream to a running Rerun viewer.",
+            ),
+            click.option(
+                "--save",
+                "save_rrd",
+                metavar="X.rrd",
+                type=click.Path(dir_okay=False),
+                help="With --live: write the live Rerun recording to X.rrd.",
+            ),
+        )
+    ):
+        func = option(func)
+    return func
+
+
+def live_view(
+    live: bool, spawn: bool, connect: str | None, save_rrd: str | None
+) -> LiveView | None:
+    """The live view the options ask for (None without --live); usage error if they clash."""
+    from replay.live import LiveView
+
+    chosen = [k for k, v in (("spawn", spawn), ("connect", connect), ("save", save_rrd)) if v]
+    if chosen and not live:
+        raise click.UsageError(f"--{chosen[0]} shows a live view: add --live")
+    if len(chosen) > 1:
+        raise click.UsageError(f"choose one of --spawn, --connect, --save (got {chosen})")
+    if not live:
+        return None
+    if not chosen:
+        return LiveView("terminal")
+    return LiveView(chosen[0], connect or save_rrd)  # type: ignore[arg-type]
+
+
 def run_recording(
     out: str | os.PathLike[str],
     record: Callable[[Path, Callable[[Progress], None]], RecordResult],
@@ -83,6 +133,7 @@ def run_recording(
     force: bool = False,
     inputs: Sequence[str | os.PathLike[str]] = (),
     staged: bool = False,
+    live: LiveView | None = None,
 ) -> None:
     """Run ``record(path, progress)`` with a progress bar on stderr; report on stdout.
 
@@ -92,10 +143,15 @@ def run_recording(
     (None: unknown). A stop request (SIGINT/SIGTERM) finishes the log and exits with 128 + the
     signal number.
 
-    ``out`` is checked first (:func:`claim_log`). ``staged`` (a simulation, which can be run
-    again): the log is written beside ``out`` and renamed onto it when finished. Otherwise (a
+    ``out`` is checked first (:func:`claim_log`). ``staged`` (a simulation in virtual time,
+    which can be run again): the log is written beside ``out`` and renamed onto it when
+    finished. Otherwise (a
     recording, whose log must be on disk as it grows) an existing ``out`` is moved aside to
     ``NAME.old-N.mcap`` (``force`` only), never overwritten.
+
+    ``live``: a follower process shows the log as it grows (:class:`replay.live.LiveFollower`;
+    the terminal view replaces the progress bar), reading the log at ``out`` itself (so a live
+    simulation is not staged); if the follower fails, the recording goes on and says so once.
     """
     from tqdm import tqdm
 
@@ -105,24 +161,41 @@ def run_recording(
     guard = OutputGuard(inputs, force=force)
     guard.claim(out, what="log")
     interrupted: RecordingInterrupted | None = None
+    quiet = live is not None and live.kind == "terminal"
     with contextlib.ExitStack() as stack:
-        if staged:
+        if staged and live is None:
             path = stack.enter_context(guard.staged(out))
         else:
             path = Path(out)
             aside = move_aside(path)
             if aside is not None:
                 click.echo(f"moved the existing {os.fspath(out)} aside to {aside}", err=True)
-        with tqdm(total=total, unit="move", file=sys.stderr, desc="recording") as bar:
+        follower = None
+        if live is not None:
+            from replay.live import LiveFollower
 
-            def progress(p: Progress) -> None:
-                bar.update(p.movements - bar.n)
-                bar.set_postfix(frames=p.frames)
+            follower = LiveFollower(live, path)
+        try:
+            with tqdm(
+                total=total, unit="move", file=sys.stderr, desc="recording", disable=quiet
+            ) as bar:
 
-            try:
-                result = record(path, progress)
-            except RecordingInterrupted as exc:
-                interrupted = exc  # the log is finished: keep it
+                def progress(p: Progress) -> None:
+                    bar.update(p.movements - bar.n)
+                    bar.set_postfix(frames=p.frames)
+                    line = follower.check() if follower is not None else None
+                    if line:
+                        tqdm.write(line, file=sys.stderr)
+
+                try:
+                    result = record(path, progress)
+                except RecordingInterrupted as exc:
+                    interrupted = exc  # the log is finished: keep it
+        finally:
+            if follower is not None:
+                line = follower.wait(LIVE_WAIT_S)
+                if line:
+                    click.echo(line, err=True)
     if interrupted is not None:
         click.echo(f"{interrupted}; {os.fspath(out)} is finished and indexed", err=True)
         click.get_current_context().exit(128 + interrupted.signum)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from replay.cli.follow import end_of_follow, follow_options
 from replay.cli.process import method_options, show_skips
 
 
@@ -28,6 +29,7 @@ from replay.cli.process import method_options, show_skips
     help="Replay a corrupt log without its damaged chunks (warned) instead of refusing it.",
 )
 @method_options
+@follow_options
 def replay(
     log: Path,
     save: Path | None,
@@ -41,12 +43,19 @@ def replay(
     n_r: int,
     n_l: int,
     seed: int,
+    follow: bool,
+    idle_timeout: float,
 ) -> None:
     """Stream every stage of LOG to Rerun: panorama, masks, bearings, cones, particles, map.
 
-    Without a target option it saves LOG's name with .rrd in the current folder.
+    Without a target option it saves LOG's name with .rrd in the current folder. With --follow,
+    LOG is still being written: movements are streamed as their chunks reach the disk, the
+    viewer follows the latest movement, and the command ends when LOG is finished (exit 0) or
+    idle for --idle-timeout seconds (exit 1).
     """
+    from data_schemas.mcap.processable import ProcessableLog
     from replay.cli.recording import viewer_command
+    from replay.follow import FollowedLog
     from replay.process import open_log, result_line
     from replay.records import MethodConfig
     from replay.rerun_out import RerunTarget, open_recording, recording_id, replay_log, save_rrd
@@ -62,28 +71,29 @@ def replay(
         save = Path(log.stem + ".rrd")
     method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
     url = None
-    if save:
-        with show_skips():
-            doc = save_rrd(
-                log,
-                method,
-                save,
-                force=force,
-                skip_corrupt=skip_corrupt,
-                images=not keyframes_only,
-            )
-    else:
-        target = RerunTarget(chosen[0], connect)  # type: ignore[arg-type]
-        with show_skips(), open_log(log, skip_corrupt=skip_corrupt) as opened:
-            rec, url = open_recording(recording_id(opened), target)
-            try:
-                doc = replay_log(opened, method, rec, images=not keyframes_only)
-            finally:
-                if not serve:
-                    rec.disconnect()
+    with show_skips():
+        # a bad log fails here, before any output exists
+        opened: FollowedLog | ProcessableLog = (
+            FollowedLog(log, idle_timeout_s=idle_timeout)
+            if follow
+            else open_log(log, skip_corrupt=skip_corrupt)
+        )
+        with opened:
+            if save:
+                doc = save_rrd(opened, method, save, force=force, images=not keyframes_only)
+            else:
+                target = RerunTarget(chosen[0], connect)  # type: ignore[arg-type]
+                rec, url = open_recording(recording_id(opened), target, live=follow)
+                try:
+                    doc = replay_log(opened, method, rec, images=not keyframes_only, live=follow)
+                finally:
+                    if not serve:
+                        rec.disconnect()
     click.echo(f"{log}: {result_line(doc)}")
     if save:
         click.echo(f"wrote {save}; open it with: {viewer_command()} {save}")
+    if isinstance(opened, FollowedLog) and not serve:
+        end_of_follow(opened)
     if serve:
         import rerun as rr
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from replay.cli.recording import frame_options
+from replay.cli.recording import frame_options, live_options
 
 
 @click.command("simulate")
@@ -31,6 +31,14 @@ from replay.cli.recording import frame_options
     show_default=True,
     help="Actuation noise: relative std of each straight distance.",
 )
+@click.option(
+    "--speed",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Run at FACTOR x real time (1 = real time); default as fast as possible.",
+    metavar="FACTOR",
+)
+@live_options
 def simulate(
     scenario_arg: str,
     out: str,
@@ -42,6 +50,11 @@ def simulate(
     distance_noise: float,
     chunk_compression: str,
     force: bool,
+    speed: float | None,
+    live: bool,
+    spawn: bool,
+    connect: str | None,
+    save_rrd: str | None,
 ) -> None:
     """Simulate a session: the same record loop as `bslam record`, in virtual time.
 
@@ -52,7 +65,7 @@ def simulate(
     from recorder.record import RecordSettings
     from recorder.sim.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
     from recorder.sim.simulate import SimSettings, simulate_to_file
-    from replay.cli.recording import run_recording
+    from replay.cli.recording import live_view, run_recording
 
     if scenario_arg in BUILTIN_SCENARIOS:
         scenario = builtin_scenario(scenario_arg)
@@ -69,6 +82,7 @@ def simulate(
         ),
         turn_noise=turn_noise,
         distance_noise=distance_noise,
+        speed=speed,
     )
     run_recording(
         out,
@@ -78,5 +92,6 @@ def simulate(
         total=scenario.trajectory.n_moves,
         force=force,
         inputs=[] if scenario_arg in BUILTIN_SCENARIOS else [scenario_arg],
-        staged=True,
+        staged=speed is None,  # a paced session is written in place, so it can be followed
+        live=live_view(live, spawn, connect, save_rrd),
     )

@@ -143,10 +143,14 @@ class RerunSink:
     images : bool
         Log every frame (with masks); False logs only the keyframes (panorama, masks, bearings:
         smaller, faster).
+    live : bool
+        Send the gathered frames with each movement (a followed log), not only in batches of
+        ``BATCH_FRAMES``.
     """
 
-    def __init__(self, rec: rr.RecordingStream, *, images: bool = True) -> None:
+    def __init__(self, rec: rr.RecordingStream, *, images: bool = True, live: bool = False) -> None:
         self.rec = rec
+        self._live = live
         self.wants_images = True  # the keyframes' panoramas are shown either way
         self.wants_all_frames = images
         self._run: RunInfo | None = None
@@ -280,6 +284,8 @@ class RerunSink:
     def movement(self, record: MovementRecord) -> None:
         assert self._run is not None
         run = self._run
+        if self._live and self._batch.log_time_ns:
+            self._send_frames()
         self._set_time(record.log_time_ns, record.index)
         log = self.rec.log
         if not record.ok:
