@@ -62,14 +62,6 @@ class MovementPlan:
             self.truth_poses.insert(i, (float(doc["x"]), float(doc["y"]), float(doc["heading"])))
         return None
 
-    def keys_at(self) -> dict[int, list[tuple[int, str]]]:
-        """Frame time stamp -> the (index, phase) keyframes it is."""
-        out: dict[int, list[tuple[int, str]]] = {}
-        for index in sorted(self.keyframes):
-            for phase, t_ns in self.keyframes[index].items():
-                out.setdefault(t_ns, []).append((index, phase))
-        return out
-
     def true_position(self, t_ns: int) -> NDArray[np.float64] | None:
         """True robot position (2,) at ``t_ns`` (the last pose at or before it), or None."""
         i = bisect.bisect_right(self.truth_times_ns, t_ns) - 1
