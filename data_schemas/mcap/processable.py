@@ -1,9 +1,11 @@
 """Open a finished bearing-slam log for processing: checks first, then messages in log-time order.
 
-Every chunk is checked before any message is used: its CRC, and its message indexes against its
-records. A log the recorder wrote (stored chunks, full summary) is then read in place through
-:class:`data_schemas.mcap.index.LogIndex`; anything else (compressed or unchunked files, no
-summary or an incomplete one, damage) through :class:`data_schemas.mcap.scan.LogScan`. Every
+No message is used before its chunk is checked: its CRC, and its message indexes against its
+records. A log the recorder wrote (stored chunks, full summary) is read in place through
+:class:`data_schemas.mcap.index.LogIndex`, which checks the chunks each pass reads before the
+pass yields anything; anything else (compressed or unchunked files, no summary or an incomplete
+one, damage with ``skip_corrupt``) is checked whole at open by
+:class:`data_schemas.mcap.scan.LogScan` and read through it. Every
 problem a user can cause is one line: not MCAP, unfinished or corrupt (``bslam recover``, or
 ``--skip-corrupt`` to process the rest), no session metadata, no camera calibration, a known
 channel with the wrong schema. Channels this version does not know (another tool's ``/chatter``
@@ -31,7 +33,7 @@ from data_schemas.errors import (
     UnfinishedLogError,
     UnknownSchemaError,
 )
-from data_schemas.mcap.index import DamagedLogError, LogIndex
+from data_schemas.mcap.index import CorruptChunksError, DamagedLogError, LogIndex
 from data_schemas.mcap.read import LogMessage, corrupt_log_line, corruption
 from data_schemas.mcap.scan import Damage, LogScan
 from data_schemas.registry import IMAGE_SCHEMAS, SESSION_METADATA_NAME, TOPICS, schema_dict
@@ -137,10 +139,11 @@ class ProcessableLog:
             self._file: IO[bytes] = open(self.path, "rb")  # noqa: SIM115 (closed in close)
         except OSError as exc:
             raise LogError(f"cannot open log {self.path}: {exc.strerror}") from None
+        self._index: LogIndex | None = None
         try:
             self._open(skip_corrupt)
         except BaseException:
-            self._file.close()
+            self.close()
             raise
 
     def _open(self, skip_corrupt: bool) -> None:
@@ -170,13 +173,21 @@ class ProcessableLog:
                 self._channel_names[channel_id] = (channel.topic, schema_name)
 
     def _checked_index(self, summary: Summary | None) -> LogIndex | None:
-        """The in-place index of a log the recorder wrote, if every chunk checks out."""
+        """The in-place index of a log the recorder wrote (None: read it by a scan).
+
+        The index checks the chunks each pass reads before it yields anything. With
+        ``skip_corrupt`` every chunk is checked now instead, and a damaged log is left to the
+        scan, which skips its damaged parts.
+        """
         if summary is None or not summary.channels:
             return None
         index = LogIndex.of(self._file, summary)
         if index is None or any(c not in summary.channels for c in index.channel_ids):
             return None
-        return None if index.verify() else index
+        if self._skip and index.verify():
+            index.close()
+            return None
+        return index
 
     def _indexed_metadata(self) -> dict[str, dict[str, str]]:
         found: dict[str, dict[str, str]] = {}
@@ -206,8 +217,7 @@ class ProcessableLog:
                 corrupt_log_line(
                     self.name,
                     corrupt,
-                    f"run `bslam recover {self.path} FIXED.mcap`, or pass --skip-corrupt to "
-                    "process the rest",
+                    self._advice,
                 )
             )
         if not scan.finished and not corrupt:
@@ -237,6 +247,11 @@ class ProcessableLog:
 
         ``publish_times_ns``, if given, keeps only messages whose publish time is in it (in a
         log the recorder wrote, the others' data is not even read).
+
+        Raises
+        ------
+        CorruptLogError
+            A chunk this pass reads is damaged (raised before the pass yields anything).
         """
         names = self._channel_names
         ids = [i for i, (t, _) in names.items() if topics is None or t in topics]
@@ -251,9 +266,24 @@ class ProcessableLog:
                     message.sequence,
                     message.data,
                 )
+        except CorruptChunksError as exc:
+            assert self._index is not None
+            damage = [
+                Damage(
+                    c.chunk_start_offset,
+                    c.chunk_start_offset + c.chunk_length,
+                    "chunk",
+                    problem,
+                    c.message_start_time,
+                    c.message_end_time,
+                    {names[i][0] for i in self._index.channels_in(c) if i in names},
+                )
+                for c, problem in exc.chunks
+            ]
+            raise CorruptLogError(corrupt_log_line(self.name, damage, self._advice)) from None
         except DamagedLogError as exc:
             raise CorruptLogError(
-                f"{self.name}: the log is damaged ({exc}); try `bslam recover`"
+                f"{self.name}: the log is damaged ({exc}); {self._advice}"
             ) from None
 
     def _found(
@@ -285,8 +315,17 @@ class ProcessableLog:
         for _, _, message in found:
             yield message
 
+    @property
+    def _advice(self) -> str:
+        return (
+            f"run `bslam recover {self.path} FIXED.mcap`, or pass --skip-corrupt to process "
+            "the rest"
+        )
+
     def close(self) -> None:
         """Close the file."""
+        if self._index is not None:
+            self._index.close()
         self._file.close()
 
     def __enter__(self) -> ProcessableLog:

@@ -532,15 +532,31 @@ class LogScan:
             raise
         return True
 
+    def _decompressed(self, body: int, stop: int) -> bytes | None:
+        """The records of a compressed chunk, None if they do not decompress to its CRC."""
+        try:
+            chunk = _parse(Opcode.CHUNK, self._data[body:stop])
+            stream, length = get_chunk_data_stream(chunk, validate_crc=True)  # type: ignore[arg-type]
+            records: bytes = stream.read(length)
+        except Exception as exc:  # zstd/lz4 raise their own types on damaged data
+            if isinstance(exc, _PARSE_ERRORS) or _decompression_error(exc):
+                return None
+            raise
+        return records
+
     def _chunk(self, pos: int, body: int, stop: int) -> Iterator[Record]:
         fields = self._chunk_fields(body, stop)
         if fields is None:
             raise ValueError("malformed chunk header")
         start_ns, end_ns, crc, records_at, compression = fields
+        records: bytes | mmap.mmap = self._data
         if compression == "":
             whole = crc == 0 or isal_zlib.crc32(self._data[records_at:stop]) == crc
+            base, length = records_at, stop - records_at
         else:
-            whole = self._chunk_ok(body, stop)
+            unpacked = self._decompressed(body, stop)
+            whole = unpacked is not None
+            records, base, length = unpacked or b"", 0, len(unpacked or b"")
         if not whole:
             damage = Damage(pos, stop, "chunk", "CRC mismatch", start_ns, end_ns)
             self.damage.append(damage)
@@ -553,13 +569,6 @@ class LogScan:
             return
         self.chunks += 1
         self.compressions.add(compression)
-        if compression == "":
-            records, base = self._data, records_at
-            length = stop - records_at
-        else:
-            chunk = _parse(Opcode.CHUNK, self._data[body:stop])
-            stream, length = get_chunk_data_stream(chunk)  # type: ignore[arg-type]
-            records, base = stream.read(length), 0
         counts: dict[int, list[tuple[int, int]]] = {}
         yield from self._inner(records, base, base + length, counts)
         self._last_chunk = (pos, stop, counts)

@@ -73,7 +73,16 @@ def test_process_whole(benchmark: Any, paper_log: Path, tmp_path: Path) -> None:
     _bench(
         benchmark,
         "process",
-        [sys.executable, "-m", "replay.cli", "process", str(paper_log), "--summary", str(summary)],
+        [
+            sys.executable,
+            "-m",
+            "replay.cli",
+            "process",
+            str(paper_log),
+            "--summary",
+            str(summary),
+            "--force",  # each round replaces the last one's output
+        ],
     )
     ratio = RESULTS["process"] / RESULTS["yardstick"]
     benchmark.extra_info["ratio_to_yardstick"] = ratio
@@ -88,7 +97,16 @@ def test_replay_with_rerun_output(benchmark: Any, paper_log: Path, tmp_path: Pat
     _bench(
         benchmark,
         "replay",
-        [sys.executable, "-m", "replay.cli", "replay", str(paper_log), "--save", str(rrd)],
+        [
+            sys.executable,
+            "-m",
+            "replay.cli",
+            "replay",
+            str(paper_log),
+            "--save",
+            str(rrd),
+            "--force",
+        ],
     )
     ratio = RESULTS["replay"] / RESULTS["yardstick"]
     benchmark.extra_info["ratio_to_yardstick"] = ratio

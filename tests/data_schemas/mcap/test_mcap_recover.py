@@ -150,8 +150,11 @@ def test_processable_log_refuses_or_skips_a_corrupt_chunk(
     data[chunk.chunk_start_offset + chunk.chunk_length - 12] ^= 0x01  # in its last message
     broken = tmp_path / "broken.mcap"
     broken.write_bytes(bytes(data))
-    with pytest.raises(CorruptLogError, match=r"is corrupt: chunk at bytes .*--skip-corrupt"):
-        ProcessableLog(broken)
+    with (
+        ProcessableLog(broken) as log,
+        pytest.raises(CorruptLogError, match=r"is corrupt: chunk at bytes .*--skip-corrupt"),
+    ):
+        next(log.messages())  # before the first message of the pass
     with ProcessableLog(finished) as whole:
         everything = [(m.topic, m.log_time_ns, m.data) for m in whole.messages()]
     with ProcessableLog(broken, skip_corrupt=True) as log:
