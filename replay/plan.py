@@ -32,9 +32,12 @@ class MovementPlan:
         Sorted ``/sim/ground_truth`` time stamps (empty for a real log).
     truth_poses : (n, 3) float
         Matching ``x, y, heading`` (m, m, rad; world frame).
+    turns_rad : dict index -> float
+        Commanded turn in place before each movement (CCW, rad).
     """
 
     keyframes: dict[int, dict[str, int]] = field(default_factory=dict)
+    turns_rad: dict[int, float] = field(default_factory=dict)
     truth_times_ns: list[int] = field(default_factory=list)
     truth_poses: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
 
@@ -65,6 +68,7 @@ def read_plan(log: ProcessableLog) -> MovementPlan:
         if msg.topic == MOVEMENT_TOPIC:
             phases = plan.keyframes.setdefault(int(doc["index"]), {})
             phases[str(doc["phase"])] = ns_from_stamp(doc["keyframe_timestamp"])
+            plan.turns_rad[int(doc["index"])] = float(doc["turn_rad"])
         else:
             times.append(ns_from_stamp(doc["timestamp"]))
             poses.append((float(doc["x"]), float(doc["y"]), float(doc["heading"])))

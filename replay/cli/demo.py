@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from replay.cli.process import estimator_option
+
 
 @click.command("demo")
 @click.option(
@@ -24,7 +26,8 @@ import click
     help="Seed of the simulated trajectory and of the estimator.",
 )
 @click.option("--omni", is_flag=True, help="Use the omnidirectional (donut) camera model.")
-def demo(out_dir: Path, seed: int, omni: bool) -> None:
+@estimator_option
+def demo(out_dir: Path, seed: int, omni: bool, estimator: str) -> None:
     """Simulate the paper's arena (10 movements), build the map, write demo.rrd.
 
     Writes the simulated log, the derived log, the summary JSON and a Rerun recording of every
@@ -54,7 +57,9 @@ def demo(out_dir: Path, seed: int, omni: bool) -> None:
         out_dir / "demo.summary.json",
     )
     with show_skips():
-        doc = save_rrd(log, MethodConfig(seed=seed), rrd, out=derived, summary=summary)
+        doc = save_rrd(
+            log, MethodConfig(seed=seed, estimator=estimator), rrd, out=derived, summary=summary
+        )
     click.echo(f"map: {result_line(doc)}")
     for name, est in doc["landmarks"].items():
         x, y = est["mean"]

@@ -29,6 +29,8 @@ def replay(
     connect: str | None,
     serve: bool,
     keyframes_only: bool,
+    estimator: str,
+    turn_prior_deg: float | None,
     prior: str,
     n_r: int,
     n_l: int,
@@ -55,7 +57,14 @@ def replay(
         save = Path(log.stem + ".rrd")
     where = str(save) if save else connect
     target = RerunTarget(chosen[0] if chosen else "save", where)  # type: ignore[arg-type]
-    method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
+    method = MethodConfig(
+        prior=prior,
+        n_r=n_r,
+        n_l=n_l,
+        seed=seed,
+        estimator=estimator,
+        turn_prior_deg=turn_prior_deg,
+    )
     with ProcessableLog(log) as opened:  # a bad log fails here, before any output exists
         rec, url = open_recording(log.stem, target)
         try:
