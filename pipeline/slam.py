@@ -50,12 +50,15 @@ N_FRAME_POOL = 1024
 class MovementObservation:
     """Bearings of one straight movement (robot frame, rad, CCW, 0 = forward).
 
-    A landmark missing from either mapping is not used for this movement.
+    A landmark missing from either mapping is not used for this movement. ``turn_rad`` is the
+    commanded turn in place before the movement (CCW, ``/robot/movement``), if known; the paper's
+    filter does not use it.
     """
 
     index: int
     bearings_o1_rad: Mapping[str, float]
     bearings_o2_rad: Mapping[str, float]
+    turn_rad: float | None = None
 
 
 def _empty() -> NDArray[np.float64]:

@@ -1,9 +1,10 @@
 """The Rerun blueprint: a layout for reading the method from left to right.
 
 Tab "Method": the panorama with masks and detections over the bearings as time series (what
-the camera measured); one movement in FR with its cones and particles over the log of skipped
-movements (what one movement tells); the map in FL with particles, estimates, 80% ellipses,
-trajectory and truth, over the error time series (what the method concluded).
+the camera measured); one movement in FR with its cones and particles over the log (estimator,
+skipped movements, placements) and the joint map's residuals (what one movement tells); the map
+in FL with particles, estimates, 80% ellipses, trajectory and truth, over the error time series
+(what the method concluded).
 Tab "Fig. 1": the three priors for one bearing (impartial PDF, single Gaussian, mixture) and
 their range marginals, as in the paper's Fig. 1.
 """
@@ -34,8 +35,9 @@ def method_blueprint(*, fig1_priors: tuple[str, ...] = (), live: bool = False) -
         ),
         rrb.Vertical(
             rrb.Spatial2DView(origin="/", contents="/fr/**", name="One movement in FR"),
-            rrb.TextLogView(origin="/log", name="Skipped"),
-            row_shares=[4, 1],
+            rrb.TextLogView(origin="/log", name="Log: estimator, skips, placements"),
+            rrb.TimeSeriesView(origin="/residuals", name="Joint map: residual RMS, noise (deg)"),
+            row_shares=[4, 1, 1],
         ),
         rrb.Vertical(
             rrb.Spatial2DView(origin="/", contents="/map/**", name="Map in FL (unit |L1 L2|)"),

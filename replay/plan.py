@@ -35,9 +35,12 @@ class MovementPlan:
         Sorted ``/sim/ground_truth`` time stamps (empty for a real log).
     truth_poses : list of (x, y, heading)
         Matching poses (m, m, rad; world frame).
+    turns_rad : dict index -> float
+        Commanded turn in place before each movement (CCW, rad).
     """
 
     keyframes: dict[int, dict[str, int]] = field(default_factory=dict)
+    turns_rad: dict[int, float] = field(default_factory=dict)
     truth_times_ns: list[int] = field(default_factory=list)
     truth_poses: list[tuple[float, float, float]] = field(default_factory=list)
 
@@ -54,6 +57,7 @@ class MovementPlan:
             t_ns = self.keyframes.setdefault(index, {})[phase] = ns_from_stamp(
                 doc["keyframe_timestamp"]
             )
+            self.turns_rad[index] = float(doc["turn_rad"])
             return index, phase, t_ns
         if topic == TRUTH_TOPIC:
             t_ns = ns_from_stamp(doc["timestamp"])

@@ -106,7 +106,13 @@ def result_line(doc: dict[str, Any]) -> str:
     """One line about a processed log: movements used, landmarks mapped, error if known."""
     moves = doc["movements"]
     used = sum(1 for m in moves if m["status"] == "ok")
-    text = f"{used}/{len(moves)} movements used, {len(doc['landmarks'])} landmarks mapped"
+    resected = sum(1 for m in moves if m.get("placement") == "resection")
+    text = f"{used}/{len(moves)} movements used"
+    if resected:
+        text += f" ({resected} placed by resection)"
+    text += f", {len(doc['landmarks'])} landmarks mapped"
+    if "bearing_noise_deg" in doc:
+        text += f", bearing noise {doc['bearing_noise_deg']:.2f} deg"
     if "mean_error_m" in doc:
         text += f", mean error {100 * doc['mean_error_m']:.1f} cm"
     return text

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from data_schemas.errors import EstimationError
 from data_schemas.session import Session
 from pipeline.bearings import Detection
+from pipeline.estimators import DEFAULT_ESTIMATOR, ESTIMATORS
 from pipeline.priors import PriorName
 from replay.truth import Truth
 
@@ -35,16 +36,30 @@ class MethodConfig:
         Particles per landmark in FR (after one movement) and in FL (the belief).
     seed : int
         Seed of the run's ``numpy.random.Generator``.
+    estimator : {"joint", "paper"}
+        Which estimator makes the map (:mod:`pipeline.estimators`); the particle settings are
+        the paper filter's (the joint estimator's initializer).
+    turn_prior_deg : float or None
+        Joint estimator: std of a prior on each turn in place from the commanded turn
+        (``/robot/movement``); None leaves the turns free.
     """
 
     prior: str = "impartial"
     n_r: int = 50
     n_l: int = 300
     seed: int = 0
+    estimator: str = DEFAULT_ESTIMATOR
+    turn_prior_deg: float | None = None
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:
             raise EstimationError(f"unknown prior {self.prior!r}; use one of {', '.join(PRIORS)}")
+        if self.estimator not in ESTIMATORS:
+            raise EstimationError(
+                f"unknown estimator {self.estimator!r}; use one of {', '.join(ESTIMATORS)}"
+            )
+        if self.turn_prior_deg is not None and not self.turn_prior_deg > 0.0:
+            raise EstimationError(f"turn prior std must be > 0 deg, got {self.turn_prior_deg}")
 
     @property
     def prior_name(self) -> PriorName:
@@ -53,13 +68,17 @@ class MethodConfig:
 
     def summary(self, vision_error_rad: float) -> dict[str, Any]:
         """The summary's ``method`` block."""
-        return {
+        out: dict[str, Any] = {
+            "estimator": self.estimator,
             "prior": self.prior,
             "n_r": self.n_r,
             "n_l": self.n_l,
             "vision_error_deg": round(float(np.degrees(vision_error_rad)), 9),
             "seed": self.seed,
         }
+        if self.estimator == "joint" and self.turn_prior_deg is not None:
+            out["turn_prior_deg"] = self.turn_prior_deg
+        return out
 
 
 @dataclass(frozen=True)
@@ -139,6 +158,17 @@ class MovementRecord:
         This movement's observation points in FL.
     estimates : dict name -> EstimateRecord
         The map after this movement.
+    truth_o1_world, truth_o2_world : (2,) or None
+        Simulated logs: the true keyframe positions (m, world).
+    placement : str
+        Joint estimator: ``"reference pair"`` or ``"resection"`` for a movement in the map,
+        empty otherwise (and always for the paper's filter).
+    residuals_rad : dict name -> (at O1, at O2)
+        Joint estimator: this movement's bearing residuals under the map after it.
+    bearing_noise_rad : float or None
+        Joint estimator: bearing noise std estimated from every residual of the map.
+    divergence : str
+        Joint estimator: why the map was re-initialized from the particles, if it was.
     """
 
     index: int
@@ -157,6 +187,10 @@ class MovementRecord:
     estimates: Mapping[str, EstimateRecord] = field(default_factory=dict)
     truth_o1_world: NDArray[np.float64] | None = None
     truth_o2_world: NDArray[np.float64] | None = None
+    placement: str = ""
+    residuals_rad: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
+    bearing_noise_rad: float | None = None
+    divergence: str = ""
 
     @property
     def ok(self) -> bool:

@@ -1,10 +1,14 @@
 """Regression on stored logs: rerun each log and compare its summary with the expected one.
 
-A case is a log ``NAME.mcap`` with ``NAME.expected.json`` beside it (a summary written by
-``bslam process``). The log is reprocessed with the method settings (prior, particle counts,
-seed) of the expected summary; any movement whose status changed, any landmark that appeared or
-disappeared, and any mean or covariance that moved beyond the tolerance is a regression, reported
-as one readable line. ``bslam regress --update`` rewrites the expected files on purpose.
+A case is a log ``NAME.mcap`` with an expected summary beside it (written by ``bslam process``):
+``NAME.expected.json`` and/or ``NAME.<estimator>.expected.json`` (``NAME.paper.expected.json``
+keeps the paper filter's map beside the default estimator's). The log is reprocessed with the
+method settings (estimator, prior, particle counts, seed) of the expected summary (one without
+an ``estimator`` predates the joint estimator: the paper filter made it); any movement whose
+status or placement changed, any landmark that appeared or disappeared, and any mean or
+covariance that moved beyond the tolerance is a regression, reported as one readable line.
+``bslam regress --update`` rewrites the expected files on purpose (each with its own settings;
+a log without any gets ``NAME.expected.json`` from the default estimator).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import LogError
+from pipeline.estimators import DEFAULT_ESTIMATOR, ESTIMATORS
 from replay.records import MethodConfig
 
 #: Default tolerance on a landmark mean, FL units (|L1 L2| = 0.3 m makes it 0.3 mm).
@@ -32,25 +37,50 @@ class NoCasesError(LogError):
 
 @dataclass(frozen=True)
 class Case:
-    """One stored log and its expected summary."""
+    """One stored log and one expected summary of it."""
 
     log: Path
     expected: Path
+    estimator: str = DEFAULT_ESTIMATOR
+
+    def method(self) -> MethodConfig:
+        """The settings of the expected summary (a new case: defaults, its estimator)."""
+        if self.expected.is_file():
+            return method_of(load_expected(self))
+        return MethodConfig(estimator=self.estimator)
 
     @property
     def name(self) -> str:
-        return self.log.name
+        """``NAME.mcap``, or ``NAME.mcap (paper)`` for ``NAME.paper.expected.json``."""
+        tag = self.expected.name[len(self.log.stem) : -len(EXPECTED_SUFFIX)]
+        return self.log.name + (f" ({tag[1:]})" if tag else "")
 
 
-def find_cases(folder: Path, *, update: bool = False) -> list[Case]:
-    """The cases in ``folder``: every ``*.mcap`` with an expected summary (any, if ``update``)."""
+def find_cases(folder: Path, *, update: bool = False, estimator: str | None = None) -> list[Case]:
+    """The cases in ``folder``: every ``*.mcap`` with each of its expected summaries.
+
+    ``estimator`` keeps only the summaries that estimator made. With ``update``, a log without
+    one gets a new case: ``NAME.expected.json`` for the default estimator, else
+    ``NAME.<estimator>.expected.json``.
+    """
     if not folder.is_dir():
         raise NoCasesError(f"{folder}: not a folder; give the folder of the stored logs")
     cases = []
     for log in sorted(folder.glob("*.mcap")):
-        expected = log.with_name(log.stem + EXPECTED_SUFFIX)
-        if expected.is_file() or update:
-            cases.append(Case(log, expected))
+        default = log.with_name(log.stem + EXPECTED_SUFFIX)
+        tagged = [log.with_name(f"{log.stem}.{e}{EXPECTED_SUFFIX}") for e in ESTIMATORS]
+        found = [Case(log, p) for p in (default, *tagged) if p.is_file()]
+        if estimator is not None:
+            found = [c for c in found if c.method().estimator == estimator]
+        if not found and update:
+            want = estimator or DEFAULT_ESTIMATOR
+            path = (
+                default
+                if want == DEFAULT_ESTIMATOR
+                else default.with_name(f"{log.stem}.{want}{EXPECTED_SUFFIX}")
+            )
+            found = [Case(log, path, want)]
+        cases += found
     if not cases:
         raise NoCasesError(
             f"{folder}: no NAME.mcap with NAME{EXPECTED_SUFFIX}; "
@@ -62,7 +92,14 @@ def find_cases(folder: Path, *, update: bool = False) -> list[Case]:
 def method_of(expected: Mapping[str, Any]) -> MethodConfig:
     """The settings an expected summary was produced with."""
     m = expected["method"]
-    return MethodConfig(prior=m["prior"], n_r=m["n_r"], n_l=m["n_l"], seed=m["seed"])
+    return MethodConfig(
+        prior=m["prior"],
+        n_r=m["n_r"],
+        n_l=m["n_l"],
+        seed=m["seed"],
+        estimator=m.get("estimator", "paper"),
+        turn_prior_deg=m.get("turn_prior_deg"),
+    )
 
 
 def load_expected(case: Case) -> dict[str, Any]:
@@ -132,6 +169,10 @@ def compare(
         e, a = e_moves[index], a_moves[index]
         if e["status"] != a["status"]:
             diffs.append(f"{where}: status was {e['status']!r}, now {a['status']!r}")
+        if e.get("placement") != a.get("placement"):
+            diffs.append(
+                f"{where}: placement was {e.get('placement')!r}, now {a.get('placement')!r}"
+            )
         diffs.extend(_compare_landmarks(where, e["landmarks"], a["landmarks"], mean_tol, cov_rtol))
     diffs.extend(
         _compare_landmarks("final", expected["landmarks"], actual["landmarks"], mean_tol, cov_rtol)

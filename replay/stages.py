@@ -32,7 +32,8 @@ from data_schemas.mcap.read import LogMessage
 from data_schemas.session import Session
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import BearingExtractor, Detection, decode_frame
-from pipeline.slam import BearingSlam, MovementObservation, MovementResult
+from pipeline.slam import MovementObservation, MovementResult
+from replay.estimation import estimator_for, joint_fields
 from replay.plan import PLAN_TOPICS, MovementPlan
 from replay.records import (
     EstimateRecord,
@@ -143,15 +144,7 @@ class Runner:
             truth_from_scenario(scenario, self.session.reference) if scenario else None
         )
         self.extractor = BearingExtractor(self.session.calibration, self.session.landmarks)
-        self.slam = BearingSlam(
-            self.session.landmark_names(),
-            self.session.reference,
-            vision_error_rad=self.session.vision_error_rad,
-            prior=method.prior_name,
-            n_r=method.n_r,
-            n_l=method.n_l,
-            rng=np.random.default_rng(method.seed),
-        )
+        self.slam = estimator_for(method, self.session)
         self.all_frames = any(s.wants_all_frames for s in self.sinks)
         self.images = any(s.wants_images for s in self.sinks)
         self.state = _State()
@@ -273,6 +266,7 @@ class Runner:
                 index,
                 {n: b for n, (b, _) in bearings.items() if b is not None},
                 {n: b for n, (_, b) in bearings.items() if b is not None},
+                self.plan.turns_rad.get(index),
             )
             result = self.slam.process_movement(obs)
             record = self._record(result, t_ns, log_time_ns, bearings, start, end)
@@ -309,6 +303,7 @@ class Runner:
             },
             truth_o1_world=self.plan.true_position(start.timestamp_ns),
             truth_o2_world=self.plan.true_position(end.timestamp_ns),
+            **joint_fields(result),
         )
 
 

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from replay.cli.process import estimator_option
+
 
 @click.command("demo")
 @click.option(
@@ -25,7 +27,8 @@ import click
 )
 @click.option("--omni", is_flag=True, help="Use the omnidirectional (donut) camera model.")
 @click.option("--force", is_flag=True, help="Replace the results of an earlier demo in --out.")
-def demo(out_dir: Path, seed: int, omni: bool, force: bool) -> None:
+@estimator_option
+def demo(out_dir: Path, seed: int, omni: bool, force: bool, estimator: str) -> None:
     """Simulate the paper's arena (10 movements), build the map, write demo.rrd.
 
     Writes the simulated log, the derived log, the summary JSON and a Rerun recording of every
@@ -64,7 +67,14 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool) -> None:
         staged=True,
     )
     with show_skips():
-        doc = save_rrd(log, MethodConfig(seed=seed), rrd, out=derived, summary=summary, force=force)
+        doc = save_rrd(
+            log,
+            MethodConfig(seed=seed, estimator=estimator),
+            rrd,
+            out=derived,
+            summary=summary,
+            force=force,
+        )
     click.echo(f"map: {result_line(doc)}")
     for name, est in doc["landmarks"].items():
         x, y = est["mean"]

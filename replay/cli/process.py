@@ -18,12 +18,34 @@ if TYPE_CHECKING:
     from replay.records import MethodConfig
 
 PRIOR_CHOICES = ("impartial", "gaussian", "mixture")
+#: --estimator choices, the default first (pipeline.estimators.ESTIMATORS; not imported here so
+#: that `bslam --help` stays light)
+ESTIMATOR_CHOICES = ("joint", "paper")
+
+estimator_option = click.option(
+    "--estimator",
+    type=click.Choice(ESTIMATOR_CHOICES),
+    default=ESTIMATOR_CHOICES[0],
+    show_default=True,
+    help="joint: every bearing in one factor graph (GTSAM), initialized by the paper's filter; "
+    "paper: the paper's filter alone.",
+)
 
 
 def method_options(fn: click.decorators.FC) -> click.decorators.FC:
     """The estimator options shared by process, replay and demo."""
     for option in reversed(
         [
+            estimator_option,
+            click.option(
+                "--turn-prior",
+                "turn_prior_deg",
+                type=click.FloatRange(0.0, min_open=True),
+                default=None,
+                metavar="DEG",
+                help="Joint estimator: trust each commanded turn in place to this std "
+                "(degrees) [default: turns free].",
+            ),
             click.option(
                 "--prior",
                 type=click.Choice(PRIOR_CHOICES),
@@ -122,6 +144,8 @@ def process(
     logs: tuple[str, ...],
     out: Path | None,
     summary: Path | None,
+    estimator: str,
+    turn_prior_deg: float | None,
     prior: str,
     n_r: int,
     n_l: int,
@@ -136,9 +160,11 @@ def process(
     """Process LOGS (files, folders or globs) into maps.
 
     Each log goes through bearing extraction, initialization in FR, change of frame and fusion
-    in FL. With one log and neither --out nor --summary, the summary JSON goes to stdout, and
-    each skipped movement is reported on stderr. Several logs run in parallel with one result
-    line per log (skips are counted there); one failing log is reported and the others go on.
+    in FL (the paper's filter), and with the joint estimator (default) one factor graph over
+    every bearing. With one log and neither --out nor --summary, the summary JSON goes to
+    stdout, and each skipped movement is reported on stderr. Several logs run in parallel with
+    one result line per log (skips are counted there); one failing log is reported and the
+    others go on.
 
     With --follow, LOG (one file) is still being written: each movement is processed once its
     whole chunk is on disk, a compact view of the map is updated in place on stderr, and the
@@ -148,7 +174,14 @@ def process(
     from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
 
-    method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
+    method = MethodConfig(
+        prior=prior,
+        n_r=n_r,
+        n_l=n_l,
+        seed=seed,
+        estimator=estimator,
+        turn_prior_deg=turn_prior_deg,
+    )
     if follow:
         _process_followed(logs, out, summary, method, idle_timeout, scheduler, force)
         return

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from replay.cli.process import ESTIMATOR_CHOICES
+
 DEFAULT_DIR = Path("tests/data/regress")
 
 
@@ -24,25 +26,32 @@ DEFAULT_DIR = Path("tests/data/regress")
     default=None,
     help="Largest allowed move of a landmark mean, FL units [default: 1e-3].",
 )
-def regress(folder: Path, update: bool, tolerance: float | None) -> None:
-    """Reprocess every NAME.mcap in FOLDER and compare with NAME.expected.json.
+@click.option(
+    "--estimator",
+    type=click.Choice(ESTIMATOR_CHOICES),
+    default=None,
+    help="Only the expected summaries this estimator made; with --update, create them where "
+    "missing [default: all].",
+)
+def regress(folder: Path, update: bool, tolerance: float | None, estimator: str | None) -> None:
+    """Reprocess every NAME.mcap in FOLDER and compare with its expected summaries.
 
-    Exit 1 if a movement changed status, a landmark appeared or disappeared, or a mean or
-    covariance moved beyond the tolerance. FOLDER defaults to tests/data/regress.
+    NAME.expected.json and NAME.<estimator>.expected.json (e.g. NAME.paper.expected.json) are
+    each rerun with the estimator and settings they were made with. Exit 1 if a movement changed
+    status or placement, a landmark appeared or disappeared, or a mean or covariance moved
+    beyond the tolerance. FOLDER defaults to tests/data/regress.
     """
     from tqdm import tqdm
 
     from replay.process import process_log, write_json
-    from replay.records import MethodConfig
-    from replay.regress import MEAN_TOL, compare, find_cases, load_expected, method_of
+    from replay.regress import MEAN_TOL, compare, find_cases, load_expected
 
     logging.getLogger("bslam").setLevel(logging.ERROR)  # skipped movements are in the diff
-    cases = find_cases(folder, update=update)
+    cases = find_cases(folder, update=update, estimator=estimator)
     regressions = 0
     for case in tqdm(cases, desc="regress", unit="log", file=sys.stderr):
         expected = load_expected(case) if case.expected.is_file() else None
-        method = MethodConfig() if expected is None else method_of(expected)
-        actual = process_log(case.log, method)
+        actual = process_log(case.log, case.method())
         if update:
             write_json(case.expected, actual)
             tqdm.write(f"{case.name}: wrote {case.expected.name}")

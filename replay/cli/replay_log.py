@@ -39,6 +39,8 @@ def replay(
     keyframes_only: bool,
     force: bool,
     skip_corrupt: bool,
+    estimator: str,
+    turn_prior_deg: float | None,
     prior: str,
     n_r: int,
     n_l: int,
@@ -69,7 +71,14 @@ def replay(
         raise click.UsageError(f"choose one of --save, --spawn, --connect, --serve (got {chosen})")
     if not chosen:
         save = Path(log.stem + ".rrd")
-    method = MethodConfig(prior=prior, n_r=n_r, n_l=n_l, seed=seed)
+    method = MethodConfig(
+        prior=prior,
+        n_r=n_r,
+        n_l=n_l,
+        seed=seed,
+        estimator=estimator,
+        turn_prior_deg=turn_prior_deg,
+    )
     url = None
     with show_skips():
         # a bad log fails here, before any output exists

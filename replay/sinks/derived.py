@@ -52,6 +52,28 @@ def _point_sets(sets: Mapping[str, NDArray[np.float64]]) -> list[dict[str, Any]]
     return [point_set(name, p) for name, p in sets.items()]
 
 
+def _joint_fields(record: MovementRecord) -> dict[str, Any]:
+    """The joint estimator's additions to ``/pipeline/estimate`` (absent ends left out)."""
+    out: dict[str, Any] = {}
+    if record.placement:
+        out["placement"] = record.placement
+    if record.bearing_noise_rad is not None:
+        out["bearing_noise_rad"] = record.bearing_noise_rad
+    if record.divergence:
+        out["divergence"] = record.divergence
+    if record.residuals_rad:
+        rows = []
+        for name, (r1, r2) in record.residuals_rad.items():
+            row: dict[str, Any] = {"name": name}
+            if r1 is not None:
+                row["o1_rad"] = r1
+            if r2 is not None:
+                row["o2_rad"] = r2
+            rows.append(row)
+        out["residuals"] = rows
+    return out
+
+
 class DerivedLogSink:
     """Writes the derived log of one run to ``path``."""
 
@@ -135,6 +157,7 @@ class DerivedLogSink:
             "timestamp": stamp,
             "index": record.index,
             "status": record.status,
+            "estimator": self._run.method.estimator,
             "skipped_landmarks": [
                 {"name": n, "reason": r} for n, r in record.skipped_landmarks.items()
             ],
@@ -143,6 +166,7 @@ class DerivedLogSink:
                 for n, e in record.estimates.items()
             ],
         }
+        estimate.update(_joint_fields(record))
         if record.ok and record.o1_fl is not None and record.o2_fl is not None:
             estimate["observation_points"] = {
                 "o1": record.o1_fl.mean(axis=0).tolist(),

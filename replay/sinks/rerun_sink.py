@@ -17,7 +17,10 @@ Entities (the blueprint in :mod:`replay.blueprint` lays them out):
 ``map/trajectory``              observation points O1 -> O2 of every movement so far, in FL
 ``map/truth/...``               simulated logs: true landmarks and trajectory, mapped to FL
 ``error/<name>``, ``error/mean`` distance of each estimate to the truth (m), simulated logs
-``log``                         skipped movements and landmarks, with the reason
+``log``                         skipped movements and landmarks, with the reason; joint estimator:
+                                each movement's placement and re-initializations
+``residuals/rms_deg``           joint estimator: RMS of the movement's bearing residuals, and
+``residuals/noise_deg``         the bearing noise estimated from all residuals (degrees)
 ``fig1/...``                    the paper's Fig. 1 for this log's eps (:mod:`replay.fig1`)
 =============================== ===================================================
 
@@ -166,6 +169,7 @@ class RerunSink:
         self._rgb = landmark_rgb(s)
         log_fig1(self.rec, s.vision_error_rad)
         log = self.rec.log
+        log("log", rr.TextLog(f"map made by the {run.method.estimator} estimator", level="INFO"))
         log("fr", Y_UP, static=True)
         log("map", Y_UP, static=True)
         classes = [rr.ClassDescription(info=(0, "background", (0, 0, 0)))]
@@ -294,8 +298,24 @@ class RerunSink:
         for name, reason in record.skipped_landmarks.items():
             text = f"movement {record.index}: {name} skipped: {reason}"
             log("log", rr.TextLog(text, level="INFO"))
+        self._log_joint(record)
         self._log_fr(record, run.session)
         self._log_fl(record, run)
+
+    def _log_joint(self, record: MovementRecord) -> None:
+        """Placement, residuals, noise estimate and re-initialization (joint estimator only)."""
+        log = self.rec.log
+        if record.placement:
+            text = f"movement {record.index}: placed by {record.placement}"
+            log("log", rr.TextLog(text, level="INFO"))
+        if record.divergence:
+            text = f"movement {record.index}: map re-initialized: {record.divergence}"
+            log("log", rr.TextLog(text, level="WARN"))
+        res = [r for pair in record.residuals_rad.values() for r in pair if r is not None]
+        if res:
+            log("residuals/rms_deg", rr.Scalars(math.degrees(math.sqrt(np.mean(np.square(res))))))
+        if record.bearing_noise_rad is not None:
+            log("residuals/noise_deg", rr.Scalars(math.degrees(record.bearing_noise_rad)))
 
     def _log_fr(self, record: MovementRecord, session: Session) -> None:
         log = self.rec.log

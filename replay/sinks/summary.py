@@ -4,6 +4,10 @@
 bearings used (degrees, [-180, 180)) and the belief after movement k, ``landmarks`` the final
 map (FL, unit |L1 L2|; the reference pair is the frame, so it is not listed). For simulated logs
 ``truth`` gives the true positions in FL and ``error_m`` the distance of each estimate to them.
+With the joint estimator a movement also carries its ``placement`` (``reference pair`` or
+``resection``), its bearing ``residuals_deg`` and the ``bearing_noise_deg`` estimated so far (and
+``divergence`` when the map was re-initialized); the document ends with the final
+``bearing_noise_deg`` and the number of ``reinitializations``.
 """
 
 from __future__ import annotations
@@ -48,6 +52,8 @@ class SummarySink:
         self._run: RunInfo | None = None
         self._landmarks: dict[str, Any] = {}
         self._errors_m: dict[str, float] = {}
+        self._noise_rad: float | None = None
+        self._reinitializations = 0
 
     def start(self, run: RunInfo) -> None:
         self._run = run
@@ -83,6 +89,19 @@ class SummarySink:
         }
         if record.skipped_landmarks:
             entry["skipped_landmarks"] = dict(record.skipped_landmarks)
+        if record.placement:
+            entry["placement"] = record.placement
+        if record.residuals_rad:
+            entry["residuals_deg"] = {
+                name: [_bearing_deg(r1), _bearing_deg(r2)]
+                for name, (r1, r2) in record.residuals_rad.items()
+            }
+        if record.bearing_noise_rad is not None:
+            self._noise_rad = record.bearing_noise_rad
+            entry["bearing_noise_deg"] = round(math.degrees(record.bearing_noise_rad), 6)
+        if record.divergence:
+            entry["divergence"] = record.divergence
+            self._reinitializations += 1
         if record.ok:
             self._landmarks = {
                 name: _estimate(e) for name, e in record.estimates.items() if name not in reference
@@ -107,6 +126,9 @@ class SummarySink:
 
     def finish(self) -> None:
         self.document["landmarks"] = self._landmarks
+        if self._noise_rad is not None:
+            self.document["bearing_noise_deg"] = round(math.degrees(self._noise_rad), 6)
+            self.document["reinitializations"] = self._reinitializations
         if self._errors_m:
             self.document["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}
             self.document["mean_error_m"] = _num(float(np.mean(list(self._errors_m.values()))))

@@ -23,7 +23,24 @@ def test_help_does_not_import_heavy_libraries() -> None:
     code = (
         "import sys; from replay.cli import cli\n"
         "try:\n    cli(['--help'])\nexcept SystemExit:\n    pass\n"
-        "heavy = [m for m in ('scipy', 'rerun', 'cv2', 'matplotlib', 'dask') if m in sys.modules]\n"
+        "heavy = ('scipy', 'rerun', 'cv2', 'matplotlib', 'dask', 'gtsam')\n"
+        "heavy = [m for m in heavy if m in sys.modules]\n"
         "assert not heavy, heavy\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+
+
+def test_paper_estimator_does_not_import_gtsam() -> None:
+    # gtsam (~0.3 s to import) is paid only by the commands that build a joint map
+    code = (
+        "import sys, numpy as np\n"
+        "from pipeline.estimators import make_estimator\n"
+        "from replay.stages import Runner\n"
+        "make_estimator('paper', ['A', 'B'], ('A', 'B'), vision_error_rad=0.05,"
+        " rng=np.random.default_rng(0))\n"
+        "assert 'gtsam' not in sys.modules\n"
+        "make_estimator('joint', ['A', 'B'], ('A', 'B'), vision_error_rad=0.05,"
+        " rng=np.random.default_rng(0))\n"
+        "assert 'gtsam' in sys.modules\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)

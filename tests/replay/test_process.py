@@ -68,15 +68,35 @@ def test_stdout_summary_is_the_same_document(small_log: Path, tmp_path: Path) ->
 
 
 def test_seed_changes_particles_not_contract(small_log: Path) -> None:
+    a = process_log(small_log, MethodConfig(seed=1, estimator="paper"))
+    b = process_log(small_log, MethodConfig(seed=2, estimator="paper"))
+    assert a["landmarks"]["L4"]["mean"] != b["landmarks"]["L4"]["mean"]
+    assert process_log(small_log, MethodConfig(seed=1, estimator="paper")) == a
+
+
+def test_joint_map_does_not_depend_on_the_initializer_seed(small_log: Path) -> None:
+    # the particles only initialize; the joint map is the optimum of the same bearings
     a = process_log(small_log, MethodConfig(seed=1))
     b = process_log(small_log, MethodConfig(seed=2))
-    assert a["landmarks"]["L4"]["mean"] != b["landmarks"]["L4"]["mean"]
-    assert process_log(small_log, MethodConfig(seed=1)) == a
+    assert a["method"]["estimator"] == "joint"
+    for name, est in a["landmarks"].items():
+        assert est["mean"] == pytest.approx(b["landmarks"][name]["mean"], abs=1e-6)
+
+
+def test_reference_hidden_joint_places_movement_by_resection(tmp_path: Path) -> None:
+    log = write_log(tmp_path / "hidden.mcap", hidden=lambda i, ph: ("L1",) if i == 1 else ())
+    doc = process_log(log, MethodConfig())
+    moves = doc["movements"]
+    assert [m["status"] for m in moves] == ["ok"] * len(moves)
+    assert moves[1]["placement"] == "resection"
+    assert moves[0]["placement"] == moves[2]["placement"] == "reference pair"
+    assert "L1" not in moves[1]["residuals_deg"]
+    assert set(moves[1]["residuals_deg"]) == {"L2", "L3", "L4"}
 
 
 def test_reference_hidden_skips_movement_and_goes_on(tmp_path: Path) -> None:
     log = write_log(tmp_path / "hidden.mcap", hidden=lambda i, ph: ("L1",) if i == 1 else ())
-    doc = process_log(log, MethodConfig())
+    doc = process_log(log, MethodConfig(estimator="paper"))
     statuses = [m["status"] for m in doc["movements"]]
     assert statuses[0] == "ok" and statuses[2] == "ok"
     assert statuses[1].startswith("skipped: ") and "L1" in statuses[1]
@@ -87,11 +107,20 @@ def test_reference_hidden_skips_movement_and_goes_on(tmp_path: Path) -> None:
 
 def test_occluded_landmark_is_reported_not_used(tmp_path: Path) -> None:
     log = write_log(tmp_path / "occl.mcap", hidden=lambda i, ph: ("L4",) if ph == "end" else ())
-    doc = process_log(log, MethodConfig())
+    doc = process_log(log, MethodConfig(estimator="paper"))
     assert all(m["status"] == "ok" for m in doc["movements"])
     assert "L4" not in doc["landmarks"]
     assert all("L4" in m["skipped_landmarks"] for m in doc["movements"])
     assert all(m["bearings_deg"]["L4"][1] is None for m in doc["movements"])
+
+
+def test_joint_maps_a_landmark_seen_only_at_single_keyframes(tmp_path: Path) -> None:
+    # L4 is never seen at both ends of a movement: the paper cannot use it, the joint map can
+    log = write_log(tmp_path / "occl.mcap", hidden=lambda i, ph: ("L4",) if ph == "end" else ())
+    doc = process_log(log, MethodConfig())
+    assert "L4" in doc["landmarks"]
+    assert doc["error_m"]["L4"] < 0.05
+    assert all(m["residuals_deg"].get("L4", [None, None])[1] is None for m in doc["movements"])
 
 
 def test_derived_log_channels_validate(small_log: Path, tmp_path: Path) -> None:
@@ -170,8 +199,9 @@ def test_log_of_another_writer_gives_the_same_results(small_log: Path, tmp_path:
     assert derived[0] == derived[1]
 
 
-def _hide_l1_in_movement_1(i: int, phase: str) -> tuple[str, ...]:
-    return ("L1",) if i == 1 else ()
+def _hide_all_at_end_of_movement_1(i: int, phase: str) -> tuple[str, ...]:
+    # nothing seen at O2: neither the paper's filter nor the joint map can place movement 1
+    return ("L1", "L2", "L3", "L4") if (i, phase) == (1, "end") else ()
 
 
 QUIET_RUN = """
@@ -185,7 +215,7 @@ print(doc["movements"][1]["status"])
 
 def test_library_prints_nothing_for_skips(tmp_path: Path) -> None:
     """As in an experiment run or a pool worker: no logging configured, nothing on stderr."""
-    log = write_log(tmp_path / "quiet.mcap", hidden=_hide_l1_in_movement_1)
+    log = write_log(tmp_path / "quiet.mcap", hidden=_hide_all_at_end_of_movement_1)
     root = Path(__file__).resolve().parents[2]
     done = subprocess.run(
         [sys.executable, "-c", QUIET_RUN, str(log)],
@@ -199,7 +229,7 @@ def test_library_prints_nothing_for_skips(tmp_path: Path) -> None:
 
 
 def test_one_log_reports_each_skipped_movement(tmp_path: Path) -> None:
-    log = write_log(tmp_path / "hidden.mcap", hidden=_hide_l1_in_movement_1)
+    log = write_log(tmp_path / "hidden.mcap", hidden=_hide_all_at_end_of_movement_1)
     result = CliRunner().invoke(cli, ["process", str(log), "--summary", str(tmp_path / "s.json")])
     assert result.exit_code == 0, result.output
     warnings = [line for line in result.output.splitlines() if line.startswith("warning: ")]
@@ -210,7 +240,7 @@ def test_many_logs_one_bad_one_line_each(tmp_path: Path) -> None:
     folder = tmp_path / "many"
     folder.mkdir()
     for i in range(2):
-        write_log(folder / f"run{i}.mcap", hidden=_hide_l1_in_movement_1)
+        write_log(folder / f"run{i}.mcap", hidden=_hide_all_at_end_of_movement_1)
     (folder / "broken.mcap").write_text("not a log")
     result = CliRunner().invoke(
         cli, ["process", str(folder), "--summary", str(tmp_path / "sums"), "--workers", "2"]

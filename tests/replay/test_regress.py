@@ -15,20 +15,50 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "regress"
 
 
 def test_stored_logs_have_not_regressed() -> None:
+    # the default (joint) map and the paper filter's map, each from its own expected summary;
+    # the paper's files predate the joint estimator: --estimator paper reproduces them
     result = CliRunner().invoke(cli, ["regress", str(DATA)])
     assert result.exit_code == 0, result.output
     for name in ("unwrapped", "omni", "degenerate", "occluded"):
         assert f"{name}.mcap: ok" in result.output
+        assert f"{name}.mcap (paper): ok" in result.output
+        paper = json.loads((DATA / f"{name}.paper.expected.json").read_text())
+        assert "estimator" not in paper["method"]  # written before there was a choice
+        joint = json.loads((DATA / f"{name}.expected.json").read_text())
+        assert joint["method"]["estimator"] == "joint"
 
 
 def test_stored_cases_cover_what_they_claim() -> None:
     omni = json.loads((DATA / "omni.expected.json").read_text())
     assert omni["camera_model"] == "omni"
-    degenerate = json.loads((DATA / "degenerate.expected.json").read_text())
+    degenerate = json.loads((DATA / "degenerate.paper.expected.json").read_text())
     assert "parallel" in degenerate["movements"][0]["skipped_landmarks"]["L4"]
     occluded = json.loads((DATA / "occluded.expected.json").read_text())
     assert occluded["movements"][0]["bearings_deg"]["L5"][1] is None
     assert "L5" in occluded["landmarks"]
+    # the omni log's second movement has a degenerate reference: the paper skips it, the
+    # joint map places it by resection against the landmarks already mapped
+    omni_paper = json.loads((DATA / "omni.paper.expected.json").read_text())
+    assert omni_paper["movements"][1]["status"].startswith("skipped: reference landmark")
+    assert omni["movements"][1]["placement"] == "resection"
+
+
+def test_estimator_filter_and_update_create_only_that_estimators_file(tmp_path: Path) -> None:
+    shutil.copy(DATA / "unwrapped.mcap", tmp_path / "unwrapped.mcap")
+    shutil.copy(DATA / "unwrapped.paper.expected.json", tmp_path / "unwrapped.paper.expected.json")
+    result = CliRunner().invoke(cli, ["regress", str(tmp_path), "--estimator", "joint"])
+    assert result.exit_code == 1 and "no NAME.mcap with NAME.expected.json" in result.output
+    update = ["regress", str(tmp_path), "--update", "--estimator", "joint"]
+    assert CliRunner().invoke(cli, update).exit_code == 0
+    assert sorted(p.name for p in tmp_path.glob("*.json")) == [
+        "unwrapped.expected.json",
+        "unwrapped.paper.expected.json",
+    ]
+    paper = (tmp_path / "unwrapped.paper.expected.json").read_text()
+    assert paper == (DATA / "unwrapped.paper.expected.json").read_text()  # untouched
+    result = CliRunner().invoke(cli, ["regress", str(tmp_path)])
+    assert result.exit_code == 0
+    assert "unwrapped.mcap: ok" in result.output and "unwrapped.mcap (paper): ok" in result.output
 
 
 def test_moved_estimate_is_a_readable_regression(tmp_path: Path) -> None:

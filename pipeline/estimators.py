@@ -1,0 +1,69 @@
+"""Which estimator makes the map: the paper's filter or the joint factor graph (the default).
+
+Both take one :class:`~pipeline.slam.MovementObservation` per movement and return a
+:class:`~pipeline.slam.MovementResult` (the joint one a
+:class:`~pipeline.joint.JointMovementResult`) with ``estimates`` (mean, covariance, credible
+ellipse per landmark, FL). ``gtsam`` is imported only when the joint estimator is made.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal, Protocol
+
+import numpy as np
+
+from data_schemas.errors import EstimationError
+from pipeline.estimate import LandmarkEstimate
+from pipeline.priors import PriorName
+from pipeline.slam import BearingSlam, MovementObservation, MovementResult
+
+EstimatorName = Literal["joint", "paper"]
+#: Estimator names, the default first.
+ESTIMATORS: tuple[EstimatorName, ...] = ("joint", "paper")
+DEFAULT_ESTIMATOR: EstimatorName = "joint"
+
+
+class Estimator(Protocol):
+    """What the stages need from an estimator."""
+
+    def process_movement(self, obs: MovementObservation) -> MovementResult:
+        """Fold one movement's bearings into the map."""
+
+    @property
+    def estimates(self) -> dict[str, LandmarkEstimate]:
+        """The current map: non-reference landmarks, FL."""
+
+
+def make_estimator(
+    name: str,
+    landmarks: Sequence[str],
+    reference: tuple[str, str],
+    *,
+    vision_error_rad: float,
+    rng: np.random.Generator,
+    prior: PriorName = "impartial",
+    n_r: int = 50,
+    n_l: int = 300,
+    turn_prior_sigma_rad: float | None = None,
+) -> Estimator:
+    """The estimator called ``name`` (``"joint"`` or ``"paper"``), set up for one run.
+
+    ``paper`` is :class:`~pipeline.slam.BearingSlam` exactly as the paper's method;
+    ``joint`` is :class:`~pipeline.joint.JointSlam`, initialized by the same filter.
+    ``turn_prior_sigma_rad`` only concerns the joint estimator.
+    """
+    common = {"vision_error_rad": vision_error_rad, "prior": prior, "n_r": n_r, "n_l": n_l}
+    if name == "paper":
+        return BearingSlam(landmarks, reference, rng=rng, **common)  # type: ignore[arg-type]
+    if name == "joint":
+        from pipeline.joint.estimator import JointSlam
+
+        return JointSlam(
+            landmarks,
+            reference,
+            rng=rng,
+            turn_prior_sigma_rad=turn_prior_sigma_rad,
+            **common,  # type: ignore[arg-type]
+        )
+    raise EstimationError(f"unknown estimator {name!r}; use one of {', '.join(ESTIMATORS)}")

@@ -1,0 +1,23 @@
+"""The joint estimator: every bearing in one GTSAM factor graph, initialized by the paper's filter.
+
+Modules: ``geometry`` (resection, ray intersection), ``graph`` (GTSAM keys and factors),
+``noise`` (bearing noise from residuals), ``result`` (per-movement result), ``estimator``
+(:class:`JointSlam`). ``JointSlam`` is loaded on first use: ``gtsam`` costs ~0.3 s to import,
+and reading a result needs none of it.
+"""
+
+from typing import Any
+
+from pipeline.joint.noise import NoiseEstimate
+from pipeline.joint.result import JointMovementResult
+
+
+def __getattr__(name: str) -> Any:
+    if name == "JointSlam":
+        from pipeline.joint.estimator import JointSlam
+
+        return JointSlam
+    raise AttributeError(f"module 'pipeline.joint' has no attribute {name!r}")
+
+
+__all__ = ["JointMovementResult", "JointSlam", "NoiseEstimate"]

@@ -1,0 +1,309 @@
+"""Bearing geometry of the joint estimator: predicted bearings, resection, ray intersection.
+
+Everything is in FL (unit |L1 L2|). A movement's keyframes are ``O1`` (start) and
+``O2 = O1 + d (cos h, sin h)`` (end), both with heading ``h``; a bearing is the angle of a
+landmark seen from a keyframe, relative to ``h`` (rad, CCW).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.angles import wrap_rad
+
+#: Candidate start points per axis of the resection's grid search.
+GRID_STEPS = 9
+#: Candidate movement lengths (FL) of the resection's search.
+LENGTHS_FL = np.geomspace(0.02, 4.0, 48)
+
+
+@dataclass(frozen=True)
+class MovementPose:
+    """Start point, heading and length of one straight movement (FL).
+
+    Attributes
+    ----------
+    o1_fl : (2,) float
+        Start keyframe position.
+    heading_rad : float
+        Heading during the movement (FL, CCW from the x axis).
+    length_fl : float
+        Distance O1 -> O2 (> 0).
+    """
+
+    o1_fl: NDArray[np.float64]
+    heading_rad: float
+    length_fl: float
+
+    @property
+    def o2_fl(self) -> NDArray[np.float64]:
+        """End keyframe position (2,)."""
+        u = np.array([math.cos(self.heading_rad), math.sin(self.heading_rad)])
+        out: NDArray[np.float64] = self.o1_fl + self.length_fl * u
+        return out
+
+
+def predicted_bearings(
+    origins_fl: NDArray[np.float64],
+    headings_rad: NDArray[np.float64],
+    points_fl: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Bearings (k,) of points (k, 2) seen from origins (k, 2) with headings (k,), in [-pi, pi)."""
+    d = points_fl - origins_fl
+    return wrap_rad(np.arctan2(d[:, 1], d[:, 0]) - headings_rad)
+
+
+@dataclass(frozen=True)
+class Sightings:
+    """Bearings of known points from one movement's two keyframes.
+
+    Attributes
+    ----------
+    points_fl : (k, 2) float
+        The known landmark positions.
+    end : (k,) int
+        0 for a bearing taken at O1, 1 for one taken at O2.
+    bearings_rad : (k,) float
+        The measured bearings.
+    """
+
+    points_fl: NDArray[np.float64]
+    end: NDArray[np.int64]
+    bearings_rad: NDArray[np.float64]
+
+    def residuals(self, params: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Wrapped bearing errors (..., k) for movement parameters (..., 4) = x, y, h, log d."""
+        x, y, h, logd = (params[..., i, None] for i in range(4))
+        d = np.exp(logd) * self.end
+        ox = x + d * np.cos(h)
+        oy = y + d * np.sin(h)
+        pred = np.arctan2(self.points_fl[:, 1] - oy, self.points_fl[:, 0] - ox) - h
+        out: NDArray[np.float64] = wrap_rad(self.bearings_rad - pred)
+        return out
+
+
+def _heading_from(s: Sightings, o1_fl: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Circular mean heading (n,) that fits the O1 bearings best from start points (n, 2)."""
+    at = s.end == 0
+    d = s.points_fl[at][None, :, :] - o1_fl[:, None, :]
+    ang = np.arctan2(d[..., 1], d[..., 0]) - s.bearings_rad[at]
+    out: NDArray[np.float64] = np.arctan2(np.sin(ang).sum(axis=1), np.cos(ang).sum(axis=1))
+    return out
+
+
+def _jacobian(s: Sightings, x: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]:
+    """d(predicted bearing)/d(params) (k, 4), forward differences."""
+    step = 1e-7
+    jac = np.empty((r.size, 4))
+    for i in range(4):
+        dx = np.zeros(4)
+        dx[i] = step
+        jac[:, i] = -(wrap_rad(s.residuals(x + dx) - r)) / step
+    return jac
+
+
+def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[np.float64]:
+    """Levenberg-Marquardt on the 4 movement parameters (numeric Jacobian)."""
+    x, lam = x0.copy(), 1e-3
+    r = s.residuals(x)
+    cost = float(r @ r)
+    for _ in range(iters):
+        jac = _jacobian(s, x, r)
+        a = jac.T @ jac
+        g = jac.T @ r
+        try:
+            delta = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), -g)
+        except np.linalg.LinAlgError:
+            break
+        cand = x + delta
+        rc = s.residuals(cand)
+        c = float(rc @ rc)
+        if c < cost:
+            x, r, lam = cand, rc, lam * 0.3
+            done = cost - c < 1e-14 * max(cost, 1e-30)
+            cost = c
+            if done:
+                break
+        else:
+            lam *= 10.0
+            if lam > 1e8:
+                break
+    return x
+
+
+@dataclass(frozen=True)
+class Resection:
+    """A movement placed from bearings of known points.
+
+    Attributes
+    ----------
+    pose : MovementPose
+        The best fit.
+    residuals_rad : (k,) float
+        Bearing errors at the fit.
+    position_std_fl : float
+        Std (FL) of O1 along its worst direction for a bearing noise of std 1 rad (scale by the
+        noise; inf when the bearings do not determine the movement).
+    log_length_std : float
+        Std of ``log d`` for a bearing noise of std 1 rad.
+    """
+
+    pose: MovementPose
+    residuals_rad: NDArray[np.float64]
+    position_std_fl: float
+    log_length_std: float
+
+
+def resect(
+    s: Sightings,
+    *,
+    guesses: list[MovementPose],
+    o1_known_fl: NDArray[np.float64] | None = None,
+) -> Resection | None:
+    """Place a movement from bearings of known points (O1 free, or known when chained).
+
+    Starts from ``guesses``, from ``o1_known_fl`` (the previous movement's end, the robot turns
+    in place) and from a grid of start points over the known points' box; the best few of these
+    (heading from the O1 bearings, length searched on :data:`LENGTHS_FL`) are refined by
+    Levenberg-Marquardt. None if there are no bearings at O1 (the heading is then unknown).
+    """
+    if not np.any(s.end == 0) or s.points_fl.shape[0] == 0:
+        return None
+    lo = s.points_fl.min(axis=0) - 1.0
+    hi = s.points_fl.max(axis=0) + 1.0
+    gx, gy = np.meshgrid(
+        np.linspace(lo[0], hi[0], GRID_STEPS), np.linspace(lo[1], hi[1], GRID_STEPS)
+    )
+    starts = [np.column_stack((gx.ravel(), gy.ravel()))]
+    if o1_known_fl is not None:
+        starts.insert(0, np.asarray(o1_known_fl, np.float64)[None, :])
+    o1 = np.vstack(starts)
+    h = _heading_from(s, o1)
+    n, m = o1.shape[0], LENGTHS_FL.size
+    cand = np.empty((n, m, 4))
+    cand[..., 0] = o1[:, None, 0]
+    cand[..., 1] = o1[:, None, 1]
+    cand[..., 2] = h[:, None]
+    cand[..., 3] = np.log(LENGTHS_FL)[None, :]
+    cost = (s.residuals(cand.reshape(-1, 4)) ** 2).sum(axis=1)
+    order = np.argsort(cost)[:4]
+    seeds = [cand.reshape(-1, 4)[i] for i in order]
+    seeds += [
+        np.array([g.o1_fl[0], g.o1_fl[1], g.heading_rad, math.log(g.length_fl)]) for g in guesses
+    ]
+    best: tuple[NDArray[np.float64], float] | None = None
+    for x0 in seeds:
+        x = _refine(s, x0)
+        r = s.residuals(x)
+        c = float(r @ r)
+        if best is None or c < best[1]:
+            best = (x, c)
+    assert best is not None
+    x = best[0]
+    r = s.residuals(x)
+    info = (lambda j: j.T @ j)(_jacobian(s, x, r))
+    if o1_known_fl is not None:  # the turn in place pins O1 (to first order)
+        info[0, 0] += 1e12
+        info[1, 1] += 1e12
+    try:
+        cov = np.linalg.inv(info)
+        pos = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+        logd = math.sqrt(max(float(cov[3, 3]), 0.0))
+    except np.linalg.LinAlgError:
+        pos = logd = math.inf
+    if not (math.isfinite(pos) and math.isfinite(logd)) or np.linalg.cond(info) > 1e14:
+        pos = logd = math.inf
+    pose = MovementPose(x[:2].copy(), float(wrap_rad(float(x[2]))), float(math.exp(x[3])))
+    return Resection(pose, r, pos, logd)
+
+
+@dataclass(frozen=True)
+class RayFix:
+    """A landmark placed by intersecting its rays.
+
+    Attributes
+    ----------
+    point_fl : (2,) float
+        The least-squares intersection.
+    parallax_rad : float
+        The widest angle between two of its rays, seen from the point.
+    rms_rad : float
+        RMS of the bearing errors at the point.
+    """
+
+    point_fl: NDArray[np.float64]
+    parallax_rad: float
+    rms_rad: float
+
+
+def _intersect(
+    origins_fl: NDArray[np.float64], u: NDArray[np.float64]
+) -> NDArray[np.float64] | None:
+    """Least-squares point of rays (origins (k, 2), unit directions (k, 2)), range-weighted."""
+    nrm = np.column_stack((-u[:, 1], u[:, 0]))
+    w = np.ones(origins_fl.shape[0])
+    p = None
+    for _ in range(2):
+        a = (nrm * w[:, None]).T @ nrm
+        b = (nrm * w[:, None]).T @ (nrm * origins_fl).sum(axis=1)
+        if abs(float(np.linalg.det(a))) < 1e-12 * float(np.trace(a)) ** 2:
+            return None
+        p = np.linalg.solve(a, b)
+        w = 1.0 / np.maximum(((p - origins_fl) ** 2).sum(axis=1), 1e-9)
+    return p
+
+
+def _ray_errors(
+    point_fl: NDArray[np.float64],
+    origins_fl: NDArray[np.float64],
+    directions_rad: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Angle (k,) between each ray and the direction to the point (pi: behind)."""
+    d = point_fl - origins_fl
+    return np.abs(wrap_rad(np.arctan2(d[:, 1], d[:, 0]) - directions_rad))
+
+
+def intersect_rays(
+    origins_fl: NDArray[np.float64], directions_rad: NDArray[np.float64], inlier_rad: float
+) -> RayFix | None:
+    """Robust intersection of rays (k >= 2) from origins (k, 2) along directions (k,) (FL, rad).
+
+    Every pair of rays proposes its crossing; the one that most rays pass within ``inlier_rad``
+    of (ties: smallest squared error) wins, and the least-squares point of those rays (squared
+    perpendicular distances, then once more weighted by 1 / range^2, so that each ray counts by
+    its angular error) is the fix. None if no two rays cross ahead of both.
+    """
+    k = origins_fl.shape[0]
+    if k < 2:
+        return None
+    u = np.column_stack((np.cos(directions_rad), np.sin(directions_rad)))
+    best: tuple[int, float, NDArray[np.bool_]] | None = None
+    for i in range(k - 1):
+        for j in range(i + 1, k):
+            p = _intersect(origins_fl[[i, j]], u[[i, j]])
+            if p is None:
+                continue
+            err = _ray_errors(p, origins_fl, directions_rad)
+            inl = err <= inlier_rad
+            if not (inl[i] and inl[j]):
+                continue
+            score = (int(inl.sum()), -float((err[inl] ** 2).sum()))
+            if best is None or score > best[:2]:
+                best = (score[0], score[1], inl)
+    if best is None:
+        return None
+    inl = best[2]
+    p = _intersect(origins_fl[inl], u[inl])
+    if p is None:
+        return None
+    err = _ray_errors(p, origins_fl[inl], directions_rad[inl])
+    if np.any(err > inlier_rad):
+        return None
+    d = p - origins_fl[inl]
+    ang = np.arctan2(d[:, 1], d[:, 0])
+    spread = wrap_rad(ang[:, None] - ang[None, :])
+    return RayFix(p, float(np.abs(spread).max()), float(np.sqrt(np.mean(err**2))))

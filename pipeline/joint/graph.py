@@ -1,0 +1,113 @@
+"""GTSAM factors of the joint map: keys, bearing factors, movement constraints, gauge.
+
+One ``Pose2`` per keyframe (key ``x(2 k + end)``, ``end`` 0 at O1 and 1 at O2 of movement k),
+one ``Point2`` per landmark (key ``l(j)``, ``j`` its catalog index). FL units (|L1 L2| = 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+#: Std of the "drives straight" constraint: lateral offset (FL) and heading change (rad).
+STRAIGHT_SIGMA = (1e-3, 1e-3)
+#: Std of the "turns in place" constraint on the position (FL).
+IN_PLACE_SIGMA_FL = 1e-3
+#: Std of the gauge priors L1 = (0, 0), L2 = (1, 0) (FL).
+GAUGE_SIGMA_FL = 1e-4
+#: Std of the weak priors that keep every new variable determined (FL; rad for headings).
+WEAK_SIGMA = 100.0
+#: Huber threshold, in standard deviations of the bearing noise.
+HUBER_K = 1.345
+#: Loose std (FL) for the length of a movement: a free variable in practice.
+FREE_LENGTH_SIGMA_FL = 100.0
+
+
+def pose_key(movement: int, end: int) -> int:
+    """Key of the keyframe pose: movement index, ``end`` 0 (O1) or 1 (O2)."""
+    return int(gtsam.symbol("x", 2 * movement + end))
+
+
+def landmark_key(index: int) -> int:
+    """Key of the landmark with catalog index ``index``."""
+    return int(gtsam.symbol("l", index))
+
+
+@dataclass(frozen=True)
+class Bearing:
+    """One detected bearing in the graph.
+
+    Attributes
+    ----------
+    movement : int
+        Movement index.
+    end : int
+        0 at O1, 1 at O2.
+    landmark : str
+        Landmark name.
+    bearing_rad : float
+        Measured bearing (robot frame, CCW, 0 = forward).
+    """
+
+    movement: int
+    end: int
+    landmark: str
+    bearing_rad: float
+
+
+def bearing_noise(sigma_rad: float, robust: bool = True) -> gtsam.noiseModel.Base:
+    """Isotropic bearing noise of std ``sigma_rad``, under a Huber loss unless ``robust`` is off."""
+    base = gtsam.noiseModel.Isotropic.Sigma(1, sigma_rad)
+    if not robust:
+        return base
+    return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(HUBER_K), base)
+
+
+def bearing_factor(
+    pose: int, landmark: int, bearing_rad: float, noise: gtsam.noiseModel.Base
+) -> gtsam.NonlinearFactor:
+    """Bearing of a landmark (Point2) seen from a keyframe (Pose2)."""
+    return gtsam.BearingFactor2D(pose, landmark, gtsam.Rot2(bearing_rad), noise)
+
+
+def straight_factor(
+    o1: int, o2: int, length_fl: float | None = None, length_sigma_fl: float = 0.0
+) -> gtsam.NonlinearFactor:
+    """O2 is ahead of O1 along O1's x axis with the same heading; length free unless given."""
+    if length_fl is None:
+        length_fl, length_sigma_fl = 1.0, FREE_LENGTH_SIGMA_FL
+    noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([length_sigma_fl, *STRAIGHT_SIGMA]))
+    return gtsam.BetweenFactorPose2(o1, o2, gtsam.Pose2(length_fl, 0.0, 0.0), noise)
+
+
+def in_place_factor(
+    o2_prev: int, o1_next: int, turn_rad: float | None, turn_sigma_rad: float
+) -> gtsam.NonlinearFactor:
+    """The robot turns in place: same position; the turn is free unless ``turn_rad`` is given."""
+    sigma_turn = WEAK_SIGMA if turn_rad is None else turn_sigma_rad
+    noise = gtsam.noiseModel.Diagonal.Sigmas(
+        np.array([IN_PLACE_SIGMA_FL, IN_PLACE_SIGMA_FL, sigma_turn])
+    )
+    return gtsam.BetweenFactorPose2(o2_prev, o1_next, gtsam.Pose2(0.0, 0.0, turn_rad or 0.0), noise)
+
+
+def gauge_factors(l1: int, l2: int) -> list[gtsam.NonlinearFactor]:
+    """L1 = (0, 0), L2 = (1, 0)."""
+    noise = gtsam.noiseModel.Isotropic.Sigma(2, GAUGE_SIGMA_FL)
+    return [
+        gtsam.PriorFactorPoint2(l1, np.array([0.0, 0.0]), noise),
+        gtsam.PriorFactorPoint2(l2, np.array([1.0, 0.0]), noise),
+    ]
+
+
+def weak_point_prior(key: int, point_fl: NDArray[np.float64]) -> gtsam.NonlinearFactor:
+    """A very wide prior at a landmark's initial value (keeps the system determined)."""
+    return gtsam.PriorFactorPoint2(key, point_fl, gtsam.noiseModel.Isotropic.Sigma(2, WEAK_SIGMA))
+
+
+def weak_pose_prior(key: int, pose: gtsam.Pose2) -> gtsam.NonlinearFactor:
+    """A very wide prior at a keyframe's initial value (keeps the system determined)."""
+    return gtsam.PriorFactorPose2(key, pose, gtsam.noiseModel.Isotropic.Sigma(3, WEAK_SIGMA))

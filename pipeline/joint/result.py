@@ -1,0 +1,37 @@
+"""What the joint estimator returns per movement (no gtsam needed to read it)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from pipeline.joint.noise import NoiseEstimate
+from pipeline.slam import MovementResult
+
+
+@dataclass
+class JointMovementResult(MovementResult):
+    """A :class:`pipeline.slam.MovementResult` with what the joint estimator adds.
+
+    The particle fields (``particles_fr``, ``particles_fl``, ``belief_fl``, ``cones_fr``) are the
+    initializer's (the paper's filter); ``estimates``, ``o1_fl`` and ``o2_fl`` are the joint map's.
+
+    Attributes
+    ----------
+    placement : str
+        ``"reference pair"`` (the paper could use the movement too), ``"resection"`` (placed
+        against the landmarks in the map) or ``""`` (skipped).
+    entered : list of str
+        Landmarks that entered the graph with this movement.
+    residuals_rad : dict name -> (at O1, at O2)
+        This movement's bearing residuals under the map after it (None: not in the graph).
+    noise : NoiseEstimate or None
+        Bearing noise estimated from every residual of the map.
+    divergence : str
+        Empty, or why the map was re-initialized from the particles this movement.
+    """
+
+    placement: str = ""
+    entered: list[str] = field(default_factory=list)
+    residuals_rad: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
+    noise: NoiseEstimate | None = None
+    divergence: str = ""
