@@ -23,8 +23,10 @@ from pipeline.bearings.color_classes import LandmarkCatalogError, hsv_box_for
 from pipeline.bearings.detection import Detection, detection_from_blobs
 from pipeline.bearings.layout import OmniLayout, make_layout
 
-#: ``min_pixels`` default at the paper's 176 x 255 frames; it scales with the image area.
-MIN_PIXELS_176X255 = 12
+#: Default ``min_pixels``: a blob must be at least a 2 x 2 pixel patch, whatever the image size.
+#: A landmark far away is a sliver a pixel or two wide and a few rows tall at any resolution,
+#: so the floor is a pixel count, not a share of the image (docs/bearings.md, detection range).
+MIN_BLOB_PIXELS = 4
 _BATCH_PIXELS = 300_000  # frames classified together per OpenCV call (cache-sized)
 
 Method = Literal["profile", "components"]
@@ -66,7 +68,7 @@ class BearingExtractor:
         Landmarks (unique names) with colour names of ``data_schemas.colors`` and optional
         HSV overrides.
     min_pixels : int, optional
-        Smallest blob reported as visible; default 12 at 176x255, scaled with image area.
+        Smallest blob reported as visible, pixels; default :data:`MIN_BLOB_PIXELS` at any size.
     method : {"profile", "components"}
         Blobs as runs of the angular profile (column sums / ring sums, fast) or as 8-connected
         components (slower; separates blobs stacked in the same bearings).
@@ -97,10 +99,9 @@ class BearingExtractor:
         self.calibration = calibration
         self.names = names
         self.method = method
-        area_ratio = calibration.width * calibration.height / (176 * 255)
-        self.min_pixels = (
-            max(3, round(MIN_PIXELS_176X255 * area_ratio)) if min_pixels is None else min_pixels
-        )
+        self.min_pixels = MIN_BLOB_PIXELS if min_pixels is None else min_pixels
+        if self.min_pixels < 1:
+            raise ValueError(f"min_pixels must be at least 1, got {self.min_pixels}")
         self._layout = make_layout(calibration)
         self.max_gap_bins = self._layout.gap_bins if max_gap_bins is None else max_gap_bins
         self._boxes = [hsv_box_for(spec) for spec in catalog]
