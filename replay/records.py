@@ -139,6 +139,9 @@ class MovementRecord:
         This movement's observation points in FL.
     estimates : dict name -> EstimateRecord
         The map after this movement.
+    ambiguous_landmarks : dict name -> reason
+        Landmarks whose class (colour or band code) other landmarks share, so that a keyframe
+        detection could not say which one it saw: left out of this movement, never guessed.
     """
 
     index: int
@@ -157,6 +160,7 @@ class MovementRecord:
     estimates: Mapping[str, EstimateRecord] = field(default_factory=dict)
     truth_o1_world: NDArray[np.float64] | None = None
     truth_o2_world: NDArray[np.float64] | None = None
+    ambiguous_landmarks: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:

@@ -70,7 +70,11 @@ def _omni_profile(layout: OmniLayout, ys: NDArray[np.intp], xs: NDArray[np.intp]
 
 
 def profile_blobs(
-    profile: Profile, *, min_pixels: int, max_gap_bins: int
+    profile: Profile,
+    *,
+    min_pixels: int,
+    max_gap_bins: int,
+    anchors: NDArray[np.bool_] | None = None,
 ) -> tuple[list[Blob], int]:
     """Split a profile into blobs: circular runs of occupied bins.
 
@@ -82,6 +86,9 @@ def profile_blobs(
         Runs with fewer pixels are not blobs (noise, or a landmark too small to trust).
     max_gap_bins : int
         Runs separated by at most this many empty bins are one blob (bridges noise dropouts).
+    anchors : ndarray, (n_bins,) bool, optional
+        If given, only runs holding at least one anchor bin are blobs (band codes: bins where
+        the whole code was read, extended by neighbouring bins where part of it was).
 
     Returns
     -------
@@ -112,7 +119,10 @@ def profile_blobs(
     n_runs = widths.size
     n_px = np.bincount(run_id, weights=profile.counts[occupied], minlength=n_runs)
     largest = int(n_px.max())
-    keep = np.flatnonzero(n_px >= min_pixels)
+    ok = n_px >= min_pixels
+    if anchors is not None:
+        ok &= np.bincount(run_id, weights=anchors[occupied], minlength=n_runs) > 0
+    keep = np.flatnonzero(ok)
     if keep.size == 0:
         return [], largest
     cos_s = np.bincount(run_id, weights=profile.cos_sum[occupied], minlength=n_runs)
@@ -147,6 +157,25 @@ def is_fringe(
         if other.n_pixels >= blob.n_pixels and gap <= reach:
             return True
     return False
+
+
+def is_squeezed(
+    blob: Blob, others: list[Blob], *, max_width_rad: float, bin_width_rad: float
+) -> bool:
+    """True if ``blob``, at most ``max_width_rad`` wide, touches blobs of ``others`` on both sides.
+
+    A column where two landmarks meet side by side holds the top of one above the bottom of the
+    other (or blends of their colours): read as a band code it is a landmark that is not there.
+    """
+    if blob.width_rad > max_width_rad * (1.0 + 1e-9):
+        return False
+    left = right = False
+    for other in others:
+        offset = wrap_rad(other.bearing_rad - blob.bearing_rad)
+        if abs(offset) <= 0.5 * (blob.width_rad + other.width_rad) + 0.75 * bin_width_rad:
+            left |= offset < 0
+            right |= offset > 0
+    return left and right
 
 
 def component_blobs(

@@ -51,7 +51,7 @@ def info(log: str) -> None:
                 f"camera: {camera['source']}, {cal.model} {cal.width}x{cal.height}, "
                 f"{camera.get('encoding', '?')}, {camera.get('frame_rate_hz', '?')} Hz"
             )
-            catalog = ", ".join(f"{lm.name} ({lm.color})" for lm in session.landmarks)
+            catalog = ", ".join(f"{lm.name} ({lm.label})" for lm in session.landmarks)
             click.echo(
                 f"landmarks: {catalog}; reference {session.reference[0]}, "
                 f"{session.reference[1]}; vision error {doc['vision_error_deg']:g} deg"
