@@ -5,8 +5,9 @@ bottom. In an unwrapped panorama its bands are stacked in its columns, the top b
 rows; in an omni image they follow each ray, the top band outermost (radius grows with
 elevation). The band colours' class bits become a colour label per cell of a (rows, bins) grid,
 rows from the highest elevation down and bins the layout's angular bins (omni: labels are
-counted per ring row and sector, then pooled over ``gap_bins`` neighbouring sectors so that the
-inner rows, where a pixel spans several sectors, have no holes). Each bin's column of labels is
+taken per ring row and sector, and a cell no pixel falls in takes the label of the nearest one
+within ``gap_bins / 2`` sectors, so that the inner rows, where a pixel spans several sectors,
+have no holes). Each bin's column of labels is
 read as runs of one colour:
 
 1. runs of one colour separated by a short gap (at most 2 rows or the shorter run) are joined:
@@ -35,8 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from data_schemas.angles import TWO_PI
-from pipeline.bearings.blobs import Blob, Profile, profile_blobs
+from data_schemas.angles import TWO_PI, wrap_rad
+from pipeline.bearings.blobs import Blob
 from pipeline.bearings.layout import Layout, OmniLayout
 
 Run = tuple[int, int, int]  # colour label (1..), first row, row past the last
@@ -124,7 +125,7 @@ class BandDecoder:
         blue), which could read as another code.
         """
         if isinstance(self.layout, OmniLayout):
-            bins, labels, counts = self._omni.grid(labels_region, self.n_colors)
+            bins, labels, counts = self._omni.grid(labels_region)
         else:
             bins = np.flatnonzero(labels_region.any(axis=0))
             labels = labels_region[:, bins]
@@ -151,24 +152,61 @@ class BandDecoder:
         for i, runs in _column_runs(grid.labels):
             for stack in _stacks(runs):
                 self._read(stack, i, int(grid.bins[i]), grid.pixels, full, part)
-        out: list[tuple[list[Blob], int]] = []
-        for k in range(n_codes):
-            if not full[k].any():
-                out.append(([], 0))
-                continue
-            counts = full[k] + part[k]
-            profile = Profile(
-                counts, counts * self._cos, counts * self._sin, self.layout.bin_width_rad
-            )
-            out.append(
-                profile_blobs(
-                    profile,
-                    min_pixels=self.min_pixels,
-                    max_gap_bins=self.max_gap_bins,
-                    anchors=full[k] > 0,
+        return self._blobs(full, part)
+
+    def _blobs(
+        self, full: NDArray[np.int64], part: NDArray[np.int64]
+    ) -> list[tuple[list[Blob], int]]:
+        """Per code, its blobs: circular runs of bins read in full or partly (gaps of at most
+        ``max_gap_bins`` bridged) holding a bin read in full, with at least ``min_pixels``
+        pixels, largest first; and the largest anchored run's pixel count.
+
+        All codes at once: runs are found on the sorted (code, bin) pairs of the occupied bins.
+        """
+        n_codes, n = full.shape
+        out: list[tuple[list[Blob], int]] = [([], 0) for _ in range(n_codes)]
+        counts = full + part
+        code, bins = np.nonzero(counts)  # sorted by code, then bin
+        if code.size == 0:
+            return out
+        px = counts[code, bins]
+        new_code = np.r_[True, code[1:] != code[:-1]]
+        gap = np.r_[0, np.diff(bins) - 1]
+        start = new_code | (gap > self.max_gap_bins)
+        run = np.cumsum(start) - 1
+        n_runs = int(run[-1]) + 1
+        first_bin = bins[start]  # runs in array order: first and last bin of each
+        last_bin = bins[np.r_[np.flatnonzero(start)[1:], code.size] - 1]
+        # across the seam: a code's last run joins its first if the gap through bin 0 is short
+        firsts = np.flatnonzero(new_code)
+        lasts = np.r_[firsts[1:], code.size] - 1
+        wrap = (bins[firsts] + n - bins[lasts] - 1 <= self.max_gap_bins) & (
+            run[firsts] != run[lasts]
+        )
+        for f, z in zip(firsts[wrap].tolist(), lasts[wrap].tolist(), strict=True):
+            head, tail = run[f], run[z]
+            first_bin[head] = first_bin[tail]  # the joined run starts before the seam
+            run[run == tail] = head
+        n_px = np.bincount(run, weights=px, minlength=n_runs)
+        anchored = np.bincount(run, weights=full[code, bins] > 0, minlength=n_runs) > 0
+        cos_s = np.bincount(run, weights=px * self._cos[bins], minlength=n_runs)
+        sin_s = np.bincount(run, weights=px * self._sin[bins], minlength=n_runs)
+        run_code = np.zeros(n_runs, np.intp)
+        run_code[run] = code
+        width = ((last_bin - first_bin) % n + 1) * self.layout.bin_width_rad
+        keep = anchored & (n_px >= self.min_pixels)
+        largest = np.zeros(n_codes)
+        np.maximum.at(largest, run_code[anchored], n_px[anchored])
+        order = np.lexsort((-n_px, run_code))
+        for r in order[keep[order]].tolist():
+            out[int(run_code[r])][0].append(
+                Blob(
+                    int(n_px[r]),
+                    wrap_rad(math.atan2(float(sin_s[r]), float(cos_s[r]))),
+                    float(width[r]),
                 )
             )
-        return out
+        return [(blobs, int(largest[k])) for k, (blobs, _) in enumerate(out)]
 
     def _read(
         self,
@@ -310,13 +348,14 @@ class _OmniRows:
         self.pixel = inside
         self.row = np.clip(np.floor(cal.r_max - radius), 0, self.n_rows - 1).astype(np.intp)
         self.bin = layout.pixel_bin.ravel()[inside].astype(np.intp)
-        self.pool = layout.gap_bins // 2  # sectors pooled on each side
+        self.pool = layout.gap_bins // 2  # holes filled from this many sectors on each side
 
     def grid(
-        self, labels_region: NDArray[np.uint8], n_colors: int
+        self, labels_region: NDArray[np.uint8]
     ) -> tuple[NDArray[np.intp], NDArray[np.uint8], NDArray[np.int64]]:
-        """Occupied sectors (with their pooled neighbours), their labels (rows, m) (the colour
-        with most pixels in the pooled cell) and pixel counts (rows, m)."""
+        """Occupied sectors (with ``pool`` neighbours each side), their labels (rows, m) and pixel
+        counts (rows, m). A cell no ring pixel falls in takes the label of the nearest labelled
+        cell of its row within ``pool`` sectors (nearer the centre a pixel spans several)."""
         label = labels_region.ravel()[self.pixel]
         hit = np.flatnonzero(label)
         n, p = self.n_bins, self.pool
@@ -324,17 +363,18 @@ class _OmniRows:
         spread = (occupied[None, :] + np.arange(-p, p + 1)[:, None]) % n
         bins = np.unique(spread)
         m = bins.size
-        cells = self.n_rows * m
         index = self.row[hit] * m + np.searchsorted(bins, self.bin[hit])
-        raw = np.bincount(index, minlength=cells).reshape(self.n_rows, m)
-        per_color = np.bincount(
-            (label[hit].astype(np.intp) - 1) * cells + index, minlength=n_colors * cells
-        ).reshape(n_colors, self.n_rows, m)
-        pooled = per_color.copy()
+        raw = np.bincount(index, minlength=self.n_rows * m).reshape(self.n_rows, m)
+        labels = np.zeros(self.n_rows * m + 1, np.uint8)  # last entry: "no neighbour"
+        labels[index] = label[hit]
+        grid = labels[:-1].reshape(self.n_rows, m)
         if m:
-            padded = np.concatenate([per_color, np.zeros((n_colors, self.n_rows, 1), np.int64)], 2)
+            rows = np.arange(self.n_rows)[:, None] * m
+            found = labels.copy()  # fill from pixels' own cells only
             for shift in range(1, p + 1):
-                pooled += padded[:, :, _neighbour(bins, shift, n)]
-                pooled += padded[:, :, _neighbour(bins, -shift, n)]
-        labels = np.where(pooled.any(axis=0), pooled.argmax(axis=0) + 1, 0).astype(np.uint8)
-        return bins, labels, raw
+                for step in (shift, -shift):
+                    nb = _neighbour(bins, step, n)
+                    source = np.where(nb < m, rows + nb[None, :], labels.size - 1)
+                    holes = grid == 0
+                    grid[holes] = found[source][holes]
+        return bins, grid, raw

@@ -70,11 +70,7 @@ def _omni_profile(layout: OmniLayout, ys: NDArray[np.intp], xs: NDArray[np.intp]
 
 
 def profile_blobs(
-    profile: Profile,
-    *,
-    min_pixels: int,
-    max_gap_bins: int,
-    anchors: NDArray[np.bool_] | None = None,
+    profile: Profile, *, min_pixels: int, max_gap_bins: int
 ) -> tuple[list[Blob], int]:
     """Split a profile into blobs: circular runs of occupied bins.
 
@@ -86,9 +82,6 @@ def profile_blobs(
         Runs with fewer pixels are not blobs (noise, or a landmark too small to trust).
     max_gap_bins : int
         Runs separated by at most this many empty bins are one blob (bridges noise dropouts).
-    anchors : ndarray, (n_bins,) bool, optional
-        If given, only runs holding at least one anchor bin are blobs (band codes: bins where
-        the whole code was read, extended by neighbouring bins where part of it was).
 
     Returns
     -------
@@ -119,10 +112,7 @@ def profile_blobs(
     n_runs = widths.size
     n_px = np.bincount(run_id, weights=profile.counts[occupied], minlength=n_runs)
     largest = int(n_px.max())
-    ok = n_px >= min_pixels
-    if anchors is not None:
-        ok &= np.bincount(run_id, weights=anchors[occupied], minlength=n_runs) > 0
-    keep = np.flatnonzero(ok)
+    keep = np.flatnonzero(n_px >= min_pixels)
     if keep.size == 0:
         return [], largest
     cos_s = np.bincount(run_id, weights=profile.cos_sum[occupied], minlength=n_runs)

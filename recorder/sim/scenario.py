@@ -63,7 +63,7 @@ DEFAULT_PIXEL_NOISE = 2.0
 #: actuation noise.
 CLEARANCE_M = 0.04
 
-BUILTIN_SCENARIOS: tuple[str, ...] = ("paper", "paper_omni")
+BUILTIN_SCENARIOS: tuple[str, ...] = ("paper", "paper_omni", "coded_3x2")
 
 # Allowed keys per object (the schema's properties; checked first for "did you mean" hints).
 _KEYS: dict[str, tuple[str, ...]] = {

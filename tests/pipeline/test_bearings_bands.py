@@ -14,6 +14,8 @@ from numpy.typing import NDArray
 from data_schemas.calibration import Calibration, UnwrappedCalibration, default_omni
 from data_schemas.session import LandmarkSpec
 from pipeline.bearings import BearingExtractor, LandmarkCatalogError
+from pipeline.bearings.bands import BandDecoder
+from pipeline.bearings.layout import make_layout
 from recorder.sim.coded import coded_landmarks
 from recorder.sim.render import Lighting, RenderedFrame, render_panorama
 from recorder.sim.world import Arena, Landmark, Pose, SimWorld
@@ -265,3 +267,57 @@ def test_every_blob_of_a_shared_class_is_returned_and_none_is_guessed(model: str
         assert det.ambiguous and not det.visible and det.bearing_rad is None
         assert det.n_blobs == 2 and len(det.blobs) == 2 and "ambiguous" in det.reason
     assert found["U"].visible and not found["U"].ambiguous and len(found["U"].blobs) == 1
+
+
+def _decoder(width: int, codes: list[tuple[int, ...]], **kw: int) -> BandDecoder:
+    """Decoder over an unwrapped layout; colours 0..5 are red..magenta (hues 0, 30, ... 150)."""
+    layout = make_layout(UnwrappedCalibration(width, 40))
+    return BandDecoder(
+        layout,
+        [0.0, 30.0, 60.0, 90.0, 120.0, 150.0],
+        codes,
+        min_pixels=kw.get("min_pixels", 4),
+        max_gap_bins=kw.get("max_gap_bins", 1),
+    )
+
+
+def _paint(labels: NDArray[np.uint8], cols: list[int], bands: list[tuple[int, int, int]]) -> None:
+    """Label rows ``a..b-1`` with colour ``c`` (0-based) in ``cols``, for each (c, a, b)."""
+    for c, a, b in bands:
+        labels[a:b, cols] = c + 1
+
+
+def test_decoder_reads_codes_on_a_synthetic_grid() -> None:
+    """Order matters, blends and short gaps are bridged, a part of a code never anchors a blob,
+    runs join across the seam, the largest blob comes first."""
+    mg, ym, cy = (5, 1), (1, 5), (3, 1)  # magenta-yellow, yellow-magenta, cyan-yellow
+    decoder = _decoder(100, [mg, ym, cy])
+    labels = np.zeros((40, 100), np.uint8)
+    _paint(labels, [10, 11, 12], [(5, 5, 15), (0, 15, 16), (1, 16, 26)])  # red blend between
+    _paint(labels, [13], [(5, 5, 15), (1, 18, 26)])  # a 3-row gap in the bottom band's top
+    _paint(labels, [14], [(5, 5, 15)])  # the bottom band hidden here: partly read, extends it
+    _paint(labels, [40], [(5, 5, 15)])  # a part alone: no blob
+    _paint(labels, [98, 99, 0, 1], [(3, 2, 10), (1, 10, 18)])  # cyan-yellow across the seam
+    _paint(labels, [60, 61], [(3, 2, 6), (1, 6, 10)])  # a smaller cyan-yellow
+    out = decoder.decode(decoder.grid(labels))
+    (blob_mg,), largest = out[0]
+    assert blob_mg.width_rad == pytest.approx(5 * 2 * math.pi / 100)  # columns 10..14
+    assert blob_mg.n_pixels == 3 * 21 + 18 + 10 and largest == blob_mg.n_pixels
+    assert out[1] == ([], 0)  # the reversed code is not there
+    seam, small = out[2][0]
+    assert seam.n_pixels == 4 * 16 and small.n_pixels == 2 * 8
+    layout = make_layout(UnwrappedCalibration(100, 40))
+    centre = math.atan2(
+        float(layout.bin_sin[[98, 99, 0, 1]].sum()), float(layout.bin_cos[[98, 99, 0, 1]].sum())
+    )
+    assert math.remainder(seam.bearing_rad - centre, 2 * math.pi) == pytest.approx(0, abs=1e-9)
+    assert seam.width_rad == pytest.approx(4 * 2 * math.pi / 100)
+
+
+def test_decoder_keeps_apart_what_a_gap_separates() -> None:
+    decoder = _decoder(100, [(5, 1)], max_gap_bins=1)
+    labels = np.zeros((40, 100), np.uint8)
+    _paint(labels, [20, 21, 23, 24], [(5, 5, 15), (1, 15, 25)])  # one empty column: one blob
+    _paint(labels, [50, 51, 54, 55], [(5, 5, 15), (1, 15, 25)])  # two empty columns: two
+    blobs, _ = decoder.decode(decoder.grid(labels))[0]
+    assert sorted(round(b.width_rad / (2 * math.pi / 100)) for b in blobs) == [2, 2, 5]
