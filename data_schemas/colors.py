@@ -7,6 +7,10 @@ extraction in ``pipeline`` (overridable per landmark from the session metadata).
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+from itertools import pairwise
+from typing import Any
+
 #: name -> nominal colour (B, G, R), 0..255, as OpenCV orders channels.
 NOMINAL_BGR: dict[str, tuple[int, int, int]] = {
     "red": (0, 0, 220),
@@ -18,3 +22,41 @@ NOMINAL_BGR: dict[str, tuple[int, int, int]] = {
 }
 
 COLOR_NAMES: tuple[str, ...] = tuple(NOMINAL_BGR)
+
+
+def class_label(color: str | None, bands: Sequence[str]) -> str:
+    """The class a landmark is recognised by: its colour, or its band colours top to bottom.
+
+    ``"red"`` for a single-colour landmark, ``"magenta-yellow"`` for a coded one. Landmarks with
+    the same label look alike to the camera.
+    """
+    return "-".join(bands) if bands else str(color)
+
+
+def appearance_problem(entry: Mapping[str, Any]) -> str | None:
+    """Why a catalog/scenario landmark entry's ``color``/``bands`` keys are unusable, or None.
+
+    A landmark has either ``"color"`` (one colour name) or ``"bands"`` (two or more colour
+    names, top to bottom); the colour names themselves are checked by the schema.
+    """
+    has_color, has_bands = "color" in entry, "bands" in entry
+    if has_color and has_bands:
+        return "give either 'color' (one colour) or 'bands' (colours top to bottom), not both"
+    if not has_color and not has_bands:
+        return "needs 'color' (one colour) or 'bands' (two or more colours, top to bottom)"
+    if has_bands and isinstance(entry["bands"], list):
+        return band_problem(entry["bands"])
+    return None
+
+
+def band_problem(bands: Sequence[str]) -> str | None:
+    """Why ``bands`` is not a band code (fewer than two bands, equal neighbours), or None."""
+    if len(bands) < 2:
+        return f"bands {list(bands)}: a coded landmark needs two or more bands"
+    same = [a for a, b in pairwise(bands) if a == b]
+    if same:
+        return (
+            f"bands {list(bands)}: two adjacent bands are both {same[0]!r}; adjacent bands "
+            "must differ (they would look like one band)"
+        )
+    return None

@@ -9,11 +9,13 @@ from __future__ import annotations
 import json
 import math
 import uuid
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from data_schemas.calibration import Calibration, calibration_from_dict
 from data_schemas.codec import validate
+from data_schemas.colors import appearance_problem, class_label
 from data_schemas.errors import MissingMetadataError, SchemaError
 
 SCHEMA_VERSION = 1
@@ -21,12 +23,42 @@ SCHEMA_VERSION = 1
 
 @dataclass(frozen=True)
 class LandmarkSpec:
-    """One entry of the landmark catalog: a name and a colour class (optional HSV override)."""
+    """One entry of the landmark catalog: a name and what it looks like.
+
+    Either ``color`` (a single-colour landmark, optional HSV override ``hsv_lo``/``hsv_hi``) or
+    ``bands`` (a coded landmark: two or more colour names, top to bottom, equal heights; then
+    ``color`` is None).
+    """
 
     name: str
-    color: str
+    color: str | None
     hsv_lo: tuple[int, int, int] | None = None
     hsv_hi: tuple[int, int, int] | None = None
+    bands: tuple[str, ...] = ()
+
+    @property
+    def label(self) -> str:
+        """The landmark's class: ``"red"`` or ``"magenta-yellow"`` (see ``class_label``)."""
+        return class_label(self.color, self.bands)
+
+
+def shared_reference_problem(
+    landmarks: Sequence[LandmarkSpec], reference: Sequence[str]
+) -> str | None:
+    """Why the reference pair is not distinct by its looks, or None.
+
+    Each reference landmark must be the only one of its class (colour or band code): the map's
+    frame is fixed by them, so they must never be confused with another landmark.
+    """
+    for ref in reference:
+        label = next((lm.label for lm in landmarks if lm.name == ref), None)
+        twins = [lm.name for lm in landmarks if lm.label == label and lm.name != ref]
+        if label is not None and twins:
+            return (
+                f"reference landmark {ref!r} shares its class {label!r} with {', '.join(twins)}; "
+                "give each reference landmark a colour or band code of its own"
+            )
+    return None
 
 
 @dataclass(frozen=True)
@@ -79,6 +111,10 @@ class Session:
 
 def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> Session:
     """Validate a session document and build its typed view (raise SchemaError)."""
+    for i, entry in enumerate(doc.get("landmarks") or []):
+        problem = appearance_problem(entry) if isinstance(entry, dict) else None
+        if problem:
+            raise SchemaError(f"{what}: field 'landmarks.{i}': {problem}")
     validate("bslam.Session", doc, what=what)
     names = [lm["name"] for lm in doc["landmarks"]]
     if len(set(names)) != len(names):
@@ -95,9 +131,10 @@ def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> 
         specs.append(
             LandmarkSpec(
                 lm["name"],
-                lm["color"],
+                lm.get("color"),
                 tuple(hsv["lo"]) if hsv else None,
                 tuple(hsv["hi"]) if hsv else None,
+                tuple(lm.get("bands", ())),
             )
         )
     return Session(

@@ -15,12 +15,21 @@ from data_schemas.calibration import Calibration, calibration_from_dict
 from data_schemas.codec import validate
 from data_schemas.errors import BslamError, CalibrationError, SchemaError
 from data_schemas.mcap.writer import software_version
-from data_schemas.session import SCHEMA_VERSION, LandmarkSpec, session_from_doc
+from data_schemas.session import (
+    SCHEMA_VERSION,
+    LandmarkSpec,
+    session_from_doc,
+    shared_reference_problem,
+)
 
 
 def landmark_entry(spec: LandmarkSpec) -> dict[str, Any]:
     """JSON form of one catalog entry (``hsv`` only when the colour class is overridden)."""
-    entry: dict[str, Any] = {"name": spec.name, "color": spec.color}
+    entry: dict[str, Any] = {"name": spec.name}
+    if spec.bands:
+        entry["bands"] = list(spec.bands)
+    else:
+        entry["color"] = spec.color
     if spec.hsv_lo is not None and spec.hsv_hi is not None:
         entry["hsv"] = {"lo": list(spec.hsv_lo), "hi": list(spec.hsv_hi)}
     return entry
@@ -71,7 +80,8 @@ def build_session_doc(
     Raises
     ------
     SchemaError
-        The document does not validate (names the field).
+        The document does not validate (names the field), or a reference landmark shares its
+        class (colour or band code) with another landmark.
     """
     doc: dict[str, Any] = {
         "schema_version": SCHEMA_VERSION,
@@ -94,7 +104,10 @@ def build_session_doc(
         doc["scenario"] = scenario
     if extra:
         doc.update(extra)
-    session_from_doc(doc)
+    session = session_from_doc(doc)
+    shared = shared_reference_problem(session.landmarks, session.reference)
+    if shared:
+        raise SchemaError(f"session: field 'reference': {shared}")
     return doc
 
 
@@ -128,8 +141,9 @@ class LandmarkCatalog:
 
 
 def load_landmark_file(path: str | os.PathLike[str]) -> LandmarkCatalog:
-    """Read a landmark file: ``{"landmarks": [{"name", "color"[, "hsv"]}], "reference": [a, b],
-    "vision_error_deg": eps}`` (the same keys as the session document); raise SchemaError."""
+    """Read a landmark file: ``{"landmarks": [{"name", "color"[, "hsv"]} or {"name", "bands"}],
+    "reference": [a, b], "vision_error_deg": eps}`` (the same keys as the session document);
+    raise SchemaError (also when a reference landmark shares its class with another)."""
     doc = _read_json(path, "landmark")
     what = f"landmark file {os.fspath(path)}"
     if not isinstance(doc, dict):
@@ -147,4 +161,7 @@ def load_landmark_file(path: str | os.PathLike[str]) -> LandmarkCatalog:
         "vision_error_deg": 3.0,
     } | doc
     session = session_from_doc(probe, what=what)
+    shared = shared_reference_problem(session.landmarks, session.reference)
+    if shared:
+        raise SchemaError(f"{what}: field 'reference': {shared}")
     return LandmarkCatalog(session.landmarks, session.reference, session.vision_error_rad)

@@ -115,4 +115,8 @@ def result_line(doc: dict[str, Any]) -> str:
         text += f", bearing noise {doc['bearing_noise_deg']:.2f} deg"
     if "mean_error_m" in doc:
         text += f", mean error {100 * doc['mean_error_m']:.1f} cm"
+    shared = doc.get("ambiguous_classes", {})
+    if shared:
+        names = ", ".join(f"{' '.join(v)} ({k})" for k, v in shared.items())
+        text += f"; not mapped, alike with no association: {names}"
     return text

@@ -169,6 +169,9 @@ class MovementRecord:
         Joint estimator: bearing noise std estimated from every residual of the map.
     divergence : str
         Joint estimator: why the map was re-initialized from the particles, if it was.
+    ambiguous_landmarks : dict name -> reason
+        Landmarks whose class (colour or band code) other landmarks share, so that a keyframe
+        detection could not say which one it saw: left out of this movement, never guessed.
     """
 
     index: int
@@ -191,6 +194,7 @@ class MovementRecord:
     residuals_rad: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     bearing_noise_rad: float | None = None
     divergence: str = ""
+    ambiguous_landmarks: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:

@@ -10,7 +10,9 @@ A movement is processed once its end keyframe and its end message have arrived; 
 cannot be used (missing keyframe, reference landmark not visible, degenerate
 geometry) is skipped with its reason and processing goes on; the reason is in the movement's
 record (so in the summary) and is logged as a warning on the ``bslam.replay`` logger, which
-prints nothing unless the application configures it (the CLI does for one log).
+prints nothing unless the application configures it (the CLI does for one log). Landmarks of a
+class that several catalog landmarks share are ambiguous: they get no bearing (the extractor
+never guesses which blob is which), and each movement's record lists them, with a warning.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Collection, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -26,10 +28,10 @@ import numpy as np
 import pybase64
 from numpy.typing import NDArray
 
-from data_schemas.errors import ImageError
+from data_schemas.errors import EstimationError, ImageError
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
-from data_schemas.session import Session
+from data_schemas.session import Session, shared_reference_problem
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import BearingExtractor, Detection, decode_frame
 from pipeline.slam import MovementObservation, MovementResult
@@ -143,6 +145,9 @@ class Runner:
         self.truth: Truth | None = (
             truth_from_scenario(scenario, self.session.reference) if scenario else None
         )
+        shared = shared_reference_problem(self.session.landmarks, self.session.reference)
+        if shared:
+            raise EstimationError(f"{log.name}: {shared}")
         self.extractor = BearingExtractor(self.session.calibration, self.session.landmarks)
         self.slam = estimator_for(method, self.session)
         self.all_frames = any(s.wants_all_frames for s in self.sinks)
@@ -250,6 +255,13 @@ class Runner:
             )
             for n in names
         }
+        ambiguous = {
+            n: k.detections[n].reason
+            for k in (start, end)
+            if k is not None
+            for n in names
+            if k.detections[n].ambiguous
+        }
         t_ns = end.timestamp_ns if end else self.state.last_timestamp_ns
         log_time_ns = end.log_time_ns if end else self.state.last_log_time_ns
         missing = [p for p, k in (("start", start), ("end", end)) if k is None]
@@ -259,7 +271,9 @@ class Runner:
                 f"no {p} keyframe" if p not in phases else f"{p} keyframe frame not in the log"
                 for p in missing
             )
-            record = MovementRecord(index, t_ns, log_time_ns, f"skipped: {why}", bearings)
+            record = MovementRecord(
+                index, t_ns, log_time_ns, f"skipped: {why}", bearings, ambiguous_landmarks=ambiguous
+            )
         else:
             assert start is not None and end is not None
             obs = MovementObservation(
@@ -270,8 +284,16 @@ class Runner:
             )
             result = self.slam.process_movement(obs)
             record = self._record(result, t_ns, log_time_ns, bearings, start, end)
+            record = replace(record, ambiguous_landmarks=ambiguous)
         if not record.ok:
             logger.warning("%s: movement %d %s", self.log.name, index, record.status)
+        if ambiguous:
+            logger.warning(
+                "%s: movement %d: %s not used (landmarks that look alike, no association)",
+                self.log.name,
+                index,
+                ", ".join(sorted(ambiguous)),
+            )
         for sink in self.sinks:
             sink.movement(record)
 

@@ -183,7 +183,7 @@ def _session_lines(metadata: dict[str, dict[str, str]]) -> list[str]:
     robot, camera = doc["robot"], doc["camera"]
     cal = session.calibration
     kind = "simulated" if session.simulated else "recorded"
-    catalog = ", ".join(f"{lm.name} ({lm.color})" for lm in session.landmarks)
+    catalog = ", ".join(f"{lm.name} ({lm.label})" for lm in session.landmarks)
     return [
         f"session: {kind} with {robot['model']} on {robot['port']}, "
         f"software {doc['software_version']}, created {_when(doc['created_unix_ns'])}",

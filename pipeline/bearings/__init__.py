@@ -1,21 +1,34 @@
-"""Bearing extraction: colour-threshold landmarks in panoramic frames, measure their bearings.
+"""Bearing extraction: find landmarks by colour or band code in panoramic frames, measure their
+bearings.
 
 Pure (arrays in, arrays out). See ``docs/bearings.md`` for colour classes, calibration models,
 accuracy and speed.
 """
 
-from pipeline.bearings.color_classes import DEFAULT_HSV, HsvBox, LandmarkCatalogError, hsv_box_for
+from pipeline.bearings.blobs import Blob
+from pipeline.bearings.color_classes import (
+    DEFAULT_HSV,
+    HsvBox,
+    LandmarkCatalogError,
+    LandmarkClass,
+    hsv_box_for,
+    landmark_classes,
+)
 from pipeline.bearings.decode import decode_frame
-from pipeline.bearings.detection import Detection
+from pipeline.bearings.detection import ClassSightings, Detection
 from pipeline.bearings.extractor import BearingExtractor, check_image
 
 __all__ = [
     "DEFAULT_HSV",
     "BearingExtractor",
+    "Blob",
+    "ClassSightings",
     "Detection",
     "HsvBox",
     "LandmarkCatalogError",
+    "LandmarkClass",
     "check_image",
     "decode_frame",
     "hsv_box_for",
+    "landmark_classes",
 ]

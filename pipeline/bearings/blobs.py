@@ -149,6 +149,25 @@ def is_fringe(
     return False
 
 
+def is_squeezed(
+    blob: Blob, others: list[Blob], *, max_width_rad: float, bin_width_rad: float
+) -> bool:
+    """True if ``blob``, at most ``max_width_rad`` wide, touches blobs of ``others`` on both sides.
+
+    A column where two landmarks meet side by side holds the top of one above the bottom of the
+    other (or blends of their colours): read as a band code it is a landmark that is not there.
+    """
+    if blob.width_rad > max_width_rad * (1.0 + 1e-9):
+        return False
+    left = right = False
+    for other in others:
+        offset = wrap_rad(other.bearing_rad - blob.bearing_rad)
+        if abs(offset) <= 0.5 * (blob.width_rad + other.width_rad) + 0.75 * bin_width_rad:
+            left |= offset < 0
+            right |= offset > 0
+    return left and right
+
+
 def component_blobs(
     mask: NDArray[np.uint8], layout: Layout, *, min_pixels: int
 ) -> tuple[list[Blob], int]:

@@ -9,9 +9,10 @@ not. A landmark's ``hsv_lo``/``hsv_hi`` in the session metadata replace the defa
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
-from data_schemas.colors import COLOR_NAMES
+from data_schemas.colors import COLOR_NAMES, band_problem
 from data_schemas.errors import CalibrationError
 from data_schemas.session import LandmarkSpec
 
@@ -44,6 +45,13 @@ class HsvBox:
         """True if the hue range runs through 179 -> 0 (red)."""
         return self.lo[0] > self.hi[0]
 
+    @property
+    def hue_centre(self) -> float:
+        """The middle of the hue range (OpenCV units, 0..180)."""
+        h_lo, h_hi = self.lo[0], self.hi[0]
+        span = (h_hi - h_lo) % 180 if self.wraps else h_hi - h_lo
+        return (h_lo + span / 2) % 180
+
     def hue_values(self) -> list[int]:
         """The hue values (0..179) inside the box."""
         h_lo, h_hi = self.lo[0], self.hi[0]
@@ -75,13 +83,14 @@ def hsv_box_for(spec: LandmarkSpec) -> HsvBox:
     LandmarkCatalogError
         Unknown colour name, only one of ``hsv_lo``/``hsv_hi`` given, or a malformed box.
     """
-    if spec.color not in DEFAULT_HSV:
+    if spec.bands:
         raise LandmarkCatalogError(
-            f"landmark {spec.name!r} has unknown colour {spec.color!r}; "
-            f"known colours: {', '.join(DEFAULT_HSV)}"
+            f"landmark {spec.name!r} is coded (bands {list(spec.bands)}); its bands use the "
+            "default box of each colour"
         )
+    color = _check_color(spec.name, spec.color)
     if spec.hsv_lo is None and spec.hsv_hi is None:
-        return DEFAULT_HSV[spec.color]
+        return DEFAULT_HSV[color]
     if spec.hsv_lo is None or spec.hsv_hi is None:
         raise LandmarkCatalogError(
             f"landmark {spec.name!r}: an HSV override needs both 'lo' and 'hi'"
@@ -97,3 +106,77 @@ def hsv_box_for(spec: LandmarkSpec) -> HsvBox:
         )
     except LandmarkCatalogError as exc:
         raise LandmarkCatalogError(f"landmark {spec.name!r}: {exc}") from None
+
+
+def _check_color(name: str, color: str | None) -> str:
+    """``color`` if it is a known colour name, else raise LandmarkCatalogError."""
+    if color is None or color not in DEFAULT_HSV:
+        raise LandmarkCatalogError(
+            f"landmark {name!r} has unknown colour {color!r}; "
+            f"known colours: {', '.join(DEFAULT_HSV)}"
+        )
+    return color
+
+
+@dataclass(frozen=True)
+class LandmarkClass:
+    """What a detection can tell apart: one colour, or one band code.
+
+    Attributes
+    ----------
+    label : str
+        ``"red"`` or ``"magenta-yellow"`` (``data_schemas.colors.class_label``).
+    colors : tuple of str
+        The colour (one) or the bands (two or more, top to bottom).
+    boxes : tuple of HsvBox
+        The HSV box of each colour (a single colour's override if given, else the defaults).
+    landmarks : tuple of str
+        Catalog names of this class, in catalog order; more than one makes the class ambiguous.
+    """
+
+    label: str
+    colors: tuple[str, ...]
+    boxes: tuple[HsvBox, ...]
+    landmarks: tuple[str, ...]
+
+    @property
+    def coded(self) -> bool:
+        """True for a band code (two or more colours)."""
+        return len(self.colors) > 1
+
+
+def landmark_classes(catalog: Sequence[LandmarkSpec]) -> list[LandmarkClass]:
+    """Group a catalog into classes (landmarks that look alike), in order of first appearance.
+
+    Raises
+    ------
+    LandmarkCatalogError
+        Unknown colour, malformed HSV override, a code with fewer than two bands or two equal
+        adjacent bands, or two landmarks of one colour with different HSV overrides.
+    """
+    classes: dict[str, LandmarkClass] = {}
+    for spec in catalog:
+        if spec.bands:
+            problem = band_problem(spec.bands)
+            if problem:
+                raise LandmarkCatalogError(f"landmark {spec.name!r}: {problem}")
+            for color in spec.bands:
+                _check_color(spec.name, color)
+            colors = tuple(spec.bands)
+            boxes = tuple(DEFAULT_HSV[c] for c in colors)
+        else:
+            boxes = (hsv_box_for(spec),)
+            colors = (str(spec.color),)
+        same = classes.get(spec.label)
+        if same is None:
+            classes[spec.label] = LandmarkClass(spec.label, colors, boxes, (spec.name,))
+        elif same.boxes != boxes:
+            raise LandmarkCatalogError(
+                f"landmarks {same.landmarks[0]!r} and {spec.name!r} are both {spec.label} but "
+                "have different HSV boxes; give landmarks of one colour the same override"
+            )
+        else:
+            classes[spec.label] = LandmarkClass(
+                same.label, same.colors, same.boxes, (*same.landmarks, spec.name)
+            )
+    return list(classes.values())

@@ -1,9 +1,10 @@
-"""What bearing extraction reports per landmark, and how blobs become a report."""
+"""What bearing extraction reports per landmark class and per landmark, and how blobs become a
+report."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from pipeline.bearings.blobs import Blob
 
@@ -34,6 +35,12 @@ class Detection:
         "" when visible; else why not.
     second_bearing_rad : float or None
         Bearing of the second-largest blob when ``n_blobs >= 2`` (reported, never averaged in).
+    blobs : tuple of Blob
+        Every blob of the landmark's class (its colour or band code), largest first: what an
+        association step matches against the map when several landmarks share a class.
+    ambiguous : bool
+        True if other catalog landmarks share this landmark's class: then no bearing is given
+        (``visible`` False, ``reason`` says so) until something associates the blobs.
     """
 
     name: str
@@ -45,6 +52,62 @@ class Detection:
     n_blobs: int
     reason: str
     second_bearing_rad: float | None = None
+    blobs: tuple[Blob, ...] = ()
+    ambiguous: bool = False
+
+
+@dataclass(frozen=True)
+class ClassSightings:
+    """Every blob of one landmark class (a colour or a band code) in one frame.
+
+    Attributes
+    ----------
+    label : str
+        The class: ``"red"`` or ``"magenta-yellow"``.
+    landmarks : tuple of str
+        Catalog landmarks of this class (more than one: the class is ambiguous).
+    blobs : tuple of Blob
+        Blobs of at least ``min_pixels`` pixels, largest first: bearing, angular width, pixels.
+    largest : int
+        Pixel count of the largest run of the class (any size; 0 if none).
+    n_fringes : int
+        Blobs dropped as mixed-colour fringes of other landmarks.
+    coded : bool
+        True for a band code.
+    """
+
+    label: str
+    landmarks: tuple[str, ...]
+    blobs: tuple[Blob, ...]
+    largest: int
+    n_fringes: int = 0
+    coded: bool = False
+
+
+def detection_of(name: str, sightings: ClassSightings, *, min_pixels: int) -> Detection:
+    """Report for landmark ``name`` from the blobs of its class.
+
+    A class of one landmark: its largest blob (see :func:`detection_from_blobs`). A class
+    several landmarks share: no bearing, the reason names them (never the largest blob's
+    bearing, which may belong to another landmark).
+    """
+    blobs = list(sightings.blobs)
+    if len(sightings.landmarks) == 1:
+        det = detection_from_blobs(
+            name, blobs, sightings.largest, min_pixels=min_pixels, n_fringes=sightings.n_fringes
+        )
+        if sightings.coded and not det.visible and not sightings.largest:
+            det = replace(det, reason=f"band code {sightings.label} not read")
+        return replace(det, blobs=sightings.blobs)
+    others = ", ".join(n for n in sightings.landmarks if n != name)
+    reason = (
+        f"ambiguous: class {sightings.label} is shared with {others} "
+        f"({len(blobs)} blob(s) seen); no association"
+    )
+    n_pixels = blobs[0].n_pixels if blobs else sightings.largest
+    return Detection(
+        name, False, None, 0.0, 0.0, n_pixels, len(blobs), reason, None, sightings.blobs, True
+    )
 
 
 def detection_from_blobs(

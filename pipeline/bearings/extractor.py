@@ -1,30 +1,41 @@
-"""Bearings of catalog landmarks in panoramic frames (unwrapped or omni calibration)."""
+"""Bearings of catalog landmarks in panoramic frames (unwrapped or omni calibration).
+
+Landmarks are found by class: a colour (blobs of its colour class) or a band code (stacks of
+band colours read along columns or rays, :mod:`pipeline.bearings.bands`). Every blob of a class
+is reported; a landmark gets a bearing only when its class is its own.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from typing import Literal
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.angles import wrap_rad
 from data_schemas.calibration import Calibration
 from data_schemas.errors import ImageError
 from data_schemas.session import LandmarkSpec
+from pipeline.bearings.bands import BandDecoder
 from pipeline.bearings.blobs import (
     Blob,
     component_blobs,
     is_fringe,
+    is_squeezed,
     profile_blobs,
     profile_of_mask,
 )
-from pipeline.bearings.classify import ColorClassifier
-from pipeline.bearings.color_classes import LandmarkCatalogError, hsv_box_for
-from pipeline.bearings.detection import Detection, detection_from_blobs
+from pipeline.bearings.classify import ClassBit, ColorClassifier
+from pipeline.bearings.color_classes import HsvBox, LandmarkCatalogError, landmark_classes
+from pipeline.bearings.detection import ClassSightings, Detection, detection_of
 from pipeline.bearings.layout import OmniLayout, make_layout
 
-#: ``min_pixels`` default at the paper's 176 x 255 frames; it scales with the image area.
-MIN_PIXELS_176X255 = 12
+#: Default ``min_pixels``: a blob must be at least a 2 x 2 pixel patch, whatever the image size.
+#: A landmark far away is a sliver a pixel or two wide and a few rows tall at any resolution,
+#: so the floor is a pixel count, not a share of the image (docs/bearings.md, detection range).
+MIN_BLOB_PIXELS = 4
 _BATCH_PIXELS = 300_000  # frames classified together per OpenCV call (cache-sized)
 
 Method = Literal["profile", "components"]
@@ -54,7 +65,7 @@ def check_image(image_bgr: object, calibration: Calibration) -> NDArray[np.uint8
 
 
 class BearingExtractor:
-    """Colour-threshold landmarks and measure their bearings, frame by frame or in batches.
+    """Find catalog landmarks and measure their bearings, frame by frame or in batches.
 
     Lookup tables for the calibration and the colour classes are built once here.
 
@@ -63,13 +74,15 @@ class BearingExtractor:
     calibration : UnwrappedCalibration or OmniCalibration
         Maps image positions to bearings; frames must have its size.
     catalog : sequence of LandmarkSpec
-        Landmarks (unique names) with colour names of ``data_schemas.colors`` and optional
-        HSV overrides.
+        Landmarks (unique names): a colour name of ``data_schemas.colors`` (optional HSV
+        override) or a band code (two or more colour names, top to bottom). Several landmarks
+        may share a class; then none of them gets a bearing from :meth:`extract` (their blobs
+        are in :meth:`extract_classes` and in each :class:`Detection`'s ``blobs``).
     min_pixels : int, optional
-        Smallest blob reported as visible; default 12 at 176x255, scaled with image area.
+        Smallest blob reported, pixels; default :data:`MIN_BLOB_PIXELS` at any size.
     method : {"profile", "components"}
-        Blobs as runs of the angular profile (column sums / ring sums, fast) or as 8-connected
-        components (slower; separates blobs stacked in the same bearings).
+        Single-colour blobs as runs of the angular profile (column sums / ring sums, fast) or
+        as 8-connected components (slower; separates blobs stacked in the same bearings).
     max_gap_bins : int, optional
         Profile runs this close (empty bins between them) are one blob; default one column
         (unwrapped) or one pixel's span at ``r_min`` (omni).
@@ -77,7 +90,7 @@ class BearingExtractor:
     Raises
     ------
     LandmarkCatalogError
-        Duplicate names, unknown colour name or a malformed HSV override.
+        Duplicate names, unknown colour name, a malformed HSV override or band code.
     """
 
     def __init__(
@@ -97,19 +110,51 @@ class BearingExtractor:
         self.calibration = calibration
         self.names = names
         self.method = method
-        area_ratio = calibration.width * calibration.height / (176 * 255)
-        self.min_pixels = (
-            max(3, round(MIN_PIXELS_176X255 * area_ratio)) if min_pixels is None else min_pixels
-        )
+        self.min_pixels = MIN_BLOB_PIXELS if min_pixels is None else min_pixels
+        if self.min_pixels < 1:
+            raise ValueError(f"min_pixels must be at least 1, got {self.min_pixels}")
         self._layout = make_layout(calibration)
         self.max_gap_bins = self._layout.gap_bins if max_gap_bins is None else max_gap_bins
-        self._boxes = [hsv_box_for(spec) for spec in catalog]
-        self._classifier = ColorClassifier(self._boxes)
+        self.classes = landmark_classes(catalog)
+        self._class_of = {n: c.label for c in self.classes for n in c.landmarks}
+        # one classifier slot per distinct HSV box, shared by every class that uses it
+        boxes: list[HsvBox] = []
+        for cls in self.classes:
+            boxes += [b for b in cls.boxes if b not in boxes]
+        self._boxes = boxes
+        self._classifier = ColorClassifier(boxes)
+        self._singles = [c for c in self.classes if not c.coded]
+        self._coded = [c for c in self.classes if c.coded]
+        self._decoder: BandDecoder | None = None
+        if self._coded:
+            band_boxes = [b for c in self._coded for b in c.boxes]
+            band_boxes = [b for i, b in enumerate(band_boxes) if b not in band_boxes[:i]]
+            self._label_luts = _label_luts(
+                [self._slot(b) for b in band_boxes], self._classifier.n_planes
+            )
+            self._decoder = BandDecoder(
+                self._layout,
+                [b.hue_centre for b in band_boxes],
+                [tuple(band_boxes.index(b) for b in c.boxes) for c in self._coded],
+                min_pixels=self.min_pixels,
+                max_gap_bins=self.max_gap_bins,
+            )
 
     def extract(self, image_bgr: NDArray[np.uint8]) -> dict[str, Detection]:
         """Detections of every catalog landmark in one BGR frame, keyed by name."""
+        return self.detections(self.extract_classes(image_bgr))
+
+    def extract_classes(self, image_bgr: NDArray[np.uint8]) -> dict[str, ClassSightings]:
+        """Every blob of every landmark class in one BGR frame, keyed by class label."""
         planes = self._classify(self._region(check_image(image_bgr, self.calibration)), 1)
-        return self._detect(planes)
+        return self._sightings(planes)
+
+    def detections(self, sightings: dict[str, ClassSightings]) -> dict[str, Detection]:
+        """Per catalog landmark (catalog order), its report from its class's sightings."""
+        return {
+            name: detection_of(name, sightings[self._class_of[name]], min_pixels=self.min_pixels)
+            for name in self.names
+        }
 
     def extract_batch(
         self, images_bgr: Sequence[NDArray[np.uint8]] | NDArray[np.uint8]
@@ -130,11 +175,11 @@ class BearingExtractor:
             planes = self._classify(stack, len(chunk))
             for i in range(len(chunk)):
                 rows = slice(i * region_h, (i + 1) * region_h)
-                results.append(self._detect([p[rows] for p in planes]))
+                results.append(self.detections(self._sightings([p[rows] for p in planes])))
         return results
 
     def masks(self, image_bgr: NDArray[np.uint8]) -> dict[str, NDArray[np.bool_]]:
-        """Per landmark, the (H, W) boolean mask of its colour class (for display)."""
+        """Per landmark, the (H, W) boolean mask of its class's colours (for display)."""
         image = check_image(image_bgr, self.calibration)
         return self._masks(self._classify(self._region(image), 1), image.shape[:2])
 
@@ -144,9 +189,12 @@ class BearingExtractor:
         """:meth:`extract` and :meth:`masks` of one frame, classifying its pixels once."""
         image = check_image(image_bgr, self.calibration)
         planes = self._classify(self._region(image), 1)
-        return self._detect(planes), self._masks(planes, image.shape[:2])
+        return self.detections(self._sightings(planes)), self._masks(planes, image.shape[:2])
 
     # ------------------------------------------------------------------ internals
+    def _slot(self, box: HsvBox) -> ClassBit:
+        return self._classifier.slots[self._boxes.index(box)]
+
     def _crop(self) -> tuple[slice, slice]:
         if isinstance(self._layout, OmniLayout):
             return self._layout.crop
@@ -167,37 +215,90 @@ class BearingExtractor:
         self, planes: list[NDArray[np.uint8]], shape: tuple[int, ...]
     ) -> dict[str, NDArray[np.bool_]]:
         """Full-frame (H, W) class masks from the classifier planes of the region."""
-        out = {}
-        for name, slot in zip(self.names, self._classifier.slots, strict=True):
+        by_label = {}
+        for cls in self.classes:
             full = np.zeros(shape, np.bool_)
-            full[self._crop()] = (planes[slot.plane] & slot.bit) != 0
-            out[name] = full
-        return out
+            for box in cls.boxes:
+                slot = self._slot(box)
+                full[self._crop()] |= (planes[slot.plane] & slot.bit) != 0
+            by_label[cls.label] = full
+        return {name: by_label[self._class_of[name]] for name in self.names}
 
-    def _detect(self, planes: list[NDArray[np.uint8]]) -> dict[str, Detection]:
-        slots = self._classifier.slots
-        found = [
-            self._blobs(np.bitwise_and(planes[slot.plane], np.uint8(slot.bit)), slot.bit)
-            for slot in slots
-        ]
+    def _sightings(self, planes: list[NDArray[np.uint8]]) -> dict[str, ClassSightings]:
+        found = []
+        for cls in self._singles:
+            slot = self._slot(cls.boxes[0])
+            found.append(
+                self._blobs(np.bitwise_and(planes[slot.plane], np.uint8(slot.bit)), slot.bit)
+            )
+        coded: list[tuple[list[Blob], int]] = []
+        if self._decoder is not None:
+            labels = _labels(planes, self._label_luts)
+            coded = self._decoder.decode(self._decoder.grid(labels))
+        code_blobs = [b for blobs, _ in coded for b in blobs]
         fringe = {
             "max_width_rad": self._layout.fringe_width_rad,
             "bin_width_rad": self._layout.bin_width_rad,
         }
         out = {}
-        for k, name in enumerate(self.names):
+        for k, cls in enumerate(self._singles):
             blobs, largest = found[k]
             others = [
-                b for j, (bj, _) in enumerate(found) if self._boxes[j] != self._boxes[k] for b in bj
+                b
+                for j, (bj, _) in enumerate(found)
+                if self._singles[j].boxes != cls.boxes
+                for b in bj
             ]
-            kept = [b for b in blobs if not is_fringe(b, others, **fringe)]
-            out[name] = detection_from_blobs(
-                name, kept, largest, min_pixels=self.min_pixels, n_fringes=len(blobs) - len(kept)
+            kept = [b for b in blobs if not is_fringe(b, others + code_blobs, **fringe)]
+            n_fringes = len(blobs) - len(kept)
+            kept = [b for b in kept if not any(self._within(b, c) for c in code_blobs)]
+            out[cls.label] = ClassSightings(
+                cls.label, cls.landmarks, tuple(kept), largest, n_fringes
+            )
+        singles = [b for blobs in out.values() for b in blobs.blobs]
+        for k, (cls, (blobs, largest)) in enumerate(zip(self._coded, coded, strict=True)):
+            others = singles + [b for j, (bj, _) in enumerate(coded) if j != k for b in bj]
+            kept = [
+                b
+                for b in blobs
+                if not is_fringe(b, others, **fringe) and not is_squeezed(b, others, **fringe)
+            ]
+            out[cls.label] = ClassSightings(
+                cls.label, cls.landmarks, tuple(kept), largest, len(blobs) - len(kept), True
             )
         return out
+
+    def _within(self, blob: Blob, code: Blob) -> bool:
+        """True if single-colour ``blob`` lies inside coded ``code``'s bearings: one of its bands
+        or a blend of two (not a landmark of its own)."""
+        gap = abs(wrap_rad(blob.bearing_rad - code.bearing_rad))
+        reach = 0.5 * (code.width_rad - blob.width_rad) + self._layout.bin_width_rad
+        return gap <= reach and blob.n_pixels <= code.n_pixels
 
     def _blobs(self, mask: NDArray[np.uint8], value: int) -> tuple[list[Blob], int]:
         if self.method == "components":
             return component_blobs(mask, self._layout, min_pixels=self.min_pixels)
         profile = profile_of_mask(mask, value, self._layout)
         return profile_blobs(profile, min_pixels=self.min_pixels, max_gap_bins=self.max_gap_bins)
+
+
+def _label_luts(slots: list[ClassBit], n_planes: int) -> list[NDArray[np.uint8]]:
+    """Per classifier plane, a 256-entry table: class bits -> band colour label (0 = none)."""
+    luts = [np.zeros(256, np.uint8) for _ in range(n_planes)]
+    bits = np.arange(256)
+    for k in reversed(range(len(slots))):  # the lowest band colour index wins overlaps
+        slot = slots[k]
+        luts[slot.plane][(bits & slot.bit) != 0] = k + 1
+    return luts
+
+
+def _labels(planes: list[NDArray[np.uint8]], luts: list[NDArray[np.uint8]]) -> NDArray[np.uint8]:
+    """Band colour label of every pixel (region-sized, 0 = none) from the classifier planes."""
+    out: NDArray[np.uint8] | None = None
+    for plane, lut in zip(planes, luts, strict=True):
+        if not lut.any():
+            continue
+        labels = np.asarray(cv2.LUT(plane, lut), np.uint8)
+        out = labels if out is None else np.where(out > 0, out, labels)
+    assert out is not None
+    return out

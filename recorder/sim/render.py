@@ -11,6 +11,10 @@ both camera models of :mod:`data_schemas.calibration`:
   linearly to elevation (``r_min`` = lowest). Inside ``r_min`` is the dark robot body, outside
   ``r_max`` black.
 
+A coded landmark's bands (equal heights on the cylinder, top to bottom) are painted one above
+the other, each at the elevations of its heights: top band at the top rows (unwrapped), at the
+outer end of its wedge (omni).
+
 Anti-aliasing: a landmark's coverage of a pixel is the integral of its footprint against a
 tent (linear B-spline) kernel one pixel wide, which reproduces linear functions on the pixel
 grid. Hence the coverage-weighted mean column of an unwrapped bar is exactly its centre, and the
@@ -93,7 +97,9 @@ class LandmarkTruth:
 
     Attributes
     ----------
-    name, color : str
+    name : str
+    color : str
+        The landmark's class: its colour, or its band code (``"magenta-yellow"``).
     bearing_true_rad : float
         True bearing of the cylinder's centre, robot frame, [-pi, pi).
     bearing_drawn_rad : float
@@ -215,13 +221,20 @@ def render_panorama(
     for i in np.argsort(-range_m):
         if not in_view[i]:
             continue
-        color = np.array(NOMINAL_BGR[world.landmarks[i].color], np.float32)
-        lo, hi = _elevation_span(float(elev_bot[i]), float(elev_top[i]))
-        if isinstance(calibration, UnwrappedCalibration):
-            _paint_bar(image, calibration, float(drawn_rad[i]), float(half_rad[i]), lo, hi, color)
-        else:
-            assert isinstance(tables, _OmniTables)
-            _paint_wedge(image, tables, float(drawn_rad[i]), float(half_rad[i]), lo, hi, color)
+        colors = world.landmarks[i].paint
+        # band k (0 = top) spans heights [(n-k-1)/n, (n-k)/n] of the cylinder
+        z_m = heights[i] * np.arange(len(colors), -1, -1) / len(colors)
+        elev = np.arctan2(z_m - CAMERA_HEIGHT_M, surface_m[i])
+        elev[0], elev[-1] = elev_top[i], elev_bot[i]
+        for k, name in enumerate(colors):
+            color = np.array(NOMINAL_BGR[name], np.float32)
+            lo, hi = _elevation_span(float(elev[k + 1]), float(elev[k]))
+            bearing, half = float(drawn_rad[i]), float(half_rad[i])
+            if isinstance(calibration, UnwrappedCalibration):
+                _paint_bar(image, calibration, bearing, half, lo, hi, color)
+            else:
+                assert isinstance(tables, _OmniTables)
+                _paint_wedge(image, tables, bearing, half, lo, hi, color)
 
     if lighting is not None:
         gain = 1.0 + rng.uniform(-lighting.gain_jitter, lighting.gain_jitter)
@@ -245,7 +258,7 @@ def render_panorama(
     truth = tuple(
         LandmarkTruth(
             lm.name,
-            lm.color,
+            lm.label,
             float(true_rad[i]),
             float(drawn_rad[i]),
             float(range_m[i]),

@@ -6,12 +6,17 @@ the reference pair, the camera, the vision error bound and the trajectory::
 
     {
       "arena": {"width": 1.05, "height": 0.68},
-      "landmarks": [{"name": "L1", "x": 0.375, "y": 0.55, "color": "red"}, ...],
+      "landmarks": [{"name": "L1", "x": 0.375, "y": 0.55, "color": "red"},
+                    {"name": "L7", "x": 0.9, "y": 0.2, "bands": ["magenta", "yellow"]}, ...],
       "reference": ["L1", "L2"],
       "camera": {"model": "unwrapped", "width": 255, "height": 176, "bearing_noise_deg": 1.0},
       "vision_error_deg": 3.0,
       "trajectory": {"start": [0.52, 0.34], "moves": 10, "distance": [0.10, 0.25], "seed": 7}
     }
+
+A landmark has either ``color`` (one colour) or ``bands`` (two or more colours, top to bottom,
+equal heights: a coded landmark). Several landmarks may share a colour or code, except the two
+of the reference pair, which must each be the only one of their class.
 
 Optional keys: ``description`` (text); landmark ``radius`` (m, default 0.01) and ``height``
 (m, default 0.15); camera ``bearing_noise_deg`` (default 0), ``pixel_noise`` (grey-level std,
@@ -44,7 +49,9 @@ from typing import Any, Literal
 
 from data_schemas.calibration import Calibration, UnwrappedCalibration, default_omni
 from data_schemas.codec import validate
+from data_schemas.colors import appearance_problem
 from data_schemas.errors import ScenarioError, SchemaError
+from data_schemas.session import LandmarkSpec, shared_reference_problem
 from recorder.moves import Move
 from recorder.sim.world import Arena, Landmark, Pose, SimWorld
 
@@ -56,7 +63,7 @@ DEFAULT_PIXEL_NOISE = 2.0
 #: actuation noise.
 CLEARANCE_M = 0.04
 
-BUILTIN_SCENARIOS: tuple[str, ...] = ("paper", "paper_omni")
+BUILTIN_SCENARIOS: tuple[str, ...] = ("paper", "paper_omni", "coded_3x2")
 
 # Allowed keys per object (the schema's properties; checked first for "did you mean" hints).
 _KEYS: dict[str, tuple[str, ...]] = {
@@ -71,7 +78,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
         "robot",
     ),
     "arena": ("width", "height"),
-    "landmarks[]": ("name", "x", "y", "color", "radius", "height"),
+    "landmarks[]": ("name", "x", "y", "color", "bands", "radius", "height"),
     "camera": ("model", "width", "height", "bearing_noise_deg", "pixel_noise", "lighting"),
     "trajectory": ("start", "moves", "distance", "seed"),
     "trajectory.moves[]": ("turn_deg", "distance"),
@@ -195,7 +202,7 @@ class Scenario:
                     "name": lm.name,
                     "x": lm.x,
                     "y": lm.y,
-                    "color": lm.color,
+                    **({"bands": list(lm.bands)} if lm.bands else {"color": lm.color}),
                     "radius": lm.radius_m,
                     "height": lm.height_m,
                 }
@@ -263,6 +270,7 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
     if not isinstance(doc, dict):
         raise ScenarioError(f"{what}: must be a JSON object")
     _check_keys(doc, what)
+    _check_appearance(doc, what)
     try:
         validate("bslam.Scenario", doc, what=what)
     except SchemaError as exc:
@@ -283,9 +291,10 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
             d["name"],
             float(d["x"]),
             float(d["y"]),
-            d["color"],
+            d.get("color"),
             float(d.get("radius", DEFAULT_LANDMARK_RADIUS_M)),
             float(d.get("height", DEFAULT_LANDMARK_HEIGHT_M)),
+            tuple(d.get("bands", ())),
         )
         if not (lm.radius_m <= lm.x <= arena.width_m - lm.radius_m) or not (
             lm.radius_m <= lm.y <= arena.height_m - lm.radius_m
@@ -303,6 +312,11 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
             raise fail("reference", f"{r!r} is not a landmark name (have {sorted(seen)})")
     if ref[0] == ref[1]:
         raise fail("reference", f"the two reference landmarks must differ, got {ref}")
+    shared = shared_reference_problem(
+        [LandmarkSpec(lm.name, lm.color, bands=lm.bands) for lm in landmarks], ref
+    )
+    if shared:
+        raise fail("reference", shared)
 
     cam = doc["camera"]
     camera = CameraSpec(
@@ -389,6 +403,15 @@ def _check_explicit_moves(scenario: Scenario, fail: Any) -> None:
             )
         h += m.turn_rad
         x, y = x + m.distance_m * math.cos(h), y + m.distance_m * math.sin(h)
+
+
+def _check_appearance(doc: dict[str, Any], what: str) -> None:
+    """Each landmark has either ``color`` or ``bands`` (adjacent bands differ)."""
+    landmarks = doc.get("landmarks")
+    for i, lm in enumerate(landmarks if isinstance(landmarks, list) else []):
+        problem = appearance_problem(lm) if isinstance(lm, dict) else None
+        if problem:
+            raise ScenarioError(f"{what}: key 'landmarks[{i}]': {problem}")
 
 
 def _check_keys(doc: dict[str, Any], what: str) -> None:

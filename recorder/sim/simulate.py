@@ -112,7 +112,9 @@ def simulate_to_file(
                 calibration=scenario.calibration(),
                 frame_rate_hz=s.record.frame_rate_hz,
                 encoding=s.record.encoding,
-                landmarks=[LandmarkSpec(lm.name, lm.color) for lm in scenario.landmarks],
+                landmarks=[
+                    LandmarkSpec(lm.name, lm.color, bands=lm.bands) for lm in scenario.landmarks
+                ],
                 reference=scenario.reference,
                 vision_error_rad=scenario.vision_error_rad,
                 scenario=scenario.to_dict(),

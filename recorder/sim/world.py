@@ -1,4 +1,4 @@
-"""The simulated world: a rectangular arena with coloured cylindrical landmarks.
+"""The simulated world: a rectangular arena with coloured (or band-coded) cylindrical landmarks.
 
 World frame: metres, origin at an arena corner, x along the arena width, y along its height.
 A robot pose is ``(x, y, heading)`` in the world frame (heading in rad, CCW from world +x).
@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from data_schemas.colors import class_label
 
 #: A robot pose in the world frame: x (m), y (m), heading (rad).
 Pose = tuple[float, float, float]
@@ -51,18 +52,32 @@ class Landmark:
         Catalog name (e.g. ``"L1"``).
     x, y : float
         Centre, world frame, m.
-    color : str
-        Colour class (a key of ``data_schemas.colors.NOMINAL_BGR``).
+    color : str or None
+        Colour of a single-colour landmark (a key of ``data_schemas.colors.NOMINAL_BGR``);
+        None for a coded landmark.
     radius_m, height_m : float
         Cylinder size, m.
+    bands : tuple of str
+        A coded landmark's band colours, top to bottom, equal heights (empty: single colour).
     """
 
     name: str
     x: float
     y: float
-    color: str
+    color: str | None
     radius_m: float = 0.01
     height_m: float = 0.15
+    bands: tuple[str, ...] = ()
+
+    @property
+    def label(self) -> str:
+        """The landmark's class: its colour or its band code (``"magenta-yellow"``)."""
+        return class_label(self.color, self.bands)
+
+    @property
+    def paint(self) -> tuple[str, ...]:
+        """The colours painted from top to bottom: the bands, or the one colour."""
+        return self.bands if self.bands else (str(self.color),)
 
 
 @dataclass(frozen=True, eq=False)

@@ -91,7 +91,7 @@ def _common(fn: Any) -> Any:
             "--scenario",
             default="paper",
             show_default=True,
-            help="Built-in scenario (paper, paper_omni) or a scenario JSON file.",
+            help="Built-in scenario (paper, paper_omni, coded_3x2) or a scenario JSON file.",
         ),
         click.option(
             "--workers",
@@ -179,7 +179,7 @@ def paper(**kw: Any) -> None:
     "--param",
     required=True,
     help="bearing_noise_deg, vision_error_deg, movement_length_m, camera_model, "
-    "frame_change or n_l.",
+    "frame_change, n_l or n_landmarks (that many coded landmarks in the scenario's arena).",
 )
 @click.option("--values", required=True, help="Comma-separated values, e.g. 0.5,1,2.")
 def sweep(**kw: Any) -> None:

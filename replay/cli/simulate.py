@@ -12,7 +12,7 @@ from replay.cli.recording import frame_options, live_options
     "--scenario",
     "scenario_arg",
     required=True,
-    help="Scenario JSON file, or a built-in name (paper, paper_omni).",
+    help="Scenario JSON file, or a built-in name (paper, paper_omni, coded_3x2).",
 )
 @click.option("--out", required=True, type=click.Path(dir_okay=False), help="Log to write.")
 @click.option("--seed", type=int, default=None, help="Replaces the scenario's trajectory.seed.")

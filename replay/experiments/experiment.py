@@ -198,6 +198,9 @@ def sweep_experiment(
     )
     config = _config(replace(protocol, n_l_values=()), scenario_doc(scenario))
     config.update(param=param, values=list(values))
+    # every group's scored landmarks (n_landmarks changes them from group to group)
+    scored = [n for t in tasks for n in scored_landmarks(t.scenario)]
+    config["scored_landmarks"] = list(dict.fromkeys(scored))
     info = {"command": command, "workers": workers, "scheduler": scheduler, "stage_s": stages}
     results = Results(f"sweep of {param}", config, records, rows, info)
     results.info["elapsed_s"] = round(time.perf_counter() - start, 2)

@@ -92,11 +92,23 @@ def _set_movement_length(scenario: dict[str, Any], value: float) -> None:
     scenario["trajectory"]["distance"] = [0.8 * value, 1.2 * value]
 
 
-#: scenario parameters a sweep can vary -> how to set them (value in the parameter's unit)
+def _set_n_landmarks(scenario: dict[str, Any], value: float) -> None:
+    from recorder.sim.coded import with_coded_landmarks
+
+    if value != int(value):
+        raise ProtocolError(f"n_landmarks must be a whole number, got {value:g}")
+    n = int(value)
+    scenario.update(with_coded_landmarks(scenario, n, seed=n))
+
+
+#: scenario parameters a sweep can vary -> how to set them (value in the parameter's unit);
+#: ``n_landmarks`` replaces the landmarks by that many coded ones in the scenario's arena
+#: (layout drawn from seed n, reference pair L1, L2)
 SWEEP_PARAMS = {
     "bearing_noise_deg": _set_bearing_noise,
     "vision_error_deg": _set_vision_error,
     "movement_length_m": _set_movement_length,
+    "n_landmarks": _set_n_landmarks,
 }
 #: parameters that change the protocol rather than the scenario
 PROTOCOL_PARAMS = ("frame_change", "camera_model", "n_l")

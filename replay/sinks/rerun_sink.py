@@ -59,10 +59,10 @@ BATCH_FRAMES = 64
 
 
 def landmark_rgb(session: Session) -> dict[str, tuple[int, int, int]]:
-    """Display colour (RGB) of each catalog landmark: its nominal colour."""
+    """Display colour (RGB) of each catalog landmark: its nominal colour (top band if coded)."""
     out = {}
     for spec in session.landmarks:
-        b, g, r = NOMINAL_BGR.get(spec.color, (200, 200, 200))
+        b, g, r = NOMINAL_BGR.get(spec.bands[0] if spec.bands else str(spec.color), (200, 200, 200))
         out[spec.name] = (r, g, b)
     return out
 

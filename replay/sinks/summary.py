@@ -8,17 +8,22 @@ With the joint estimator a movement also carries its ``placement`` (``reference 
 ``resection``), its bearing ``residuals_deg`` and the ``bearing_noise_deg`` estimated so far (and
 ``divergence`` when the map was re-initialized); the document ends with the final
 ``bearing_noise_deg`` and the number of ``reinitializations``.
+``ambiguous_classes`` (class -> landmarks) lists the classes several catalog landmarks share and
+``movements[k].ambiguous_landmarks`` (name -> reason) the landmarks left out of movement k for
+it: without association they are never mapped from a guess.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from data_schemas.session import LandmarkSpec
 from replay.records import EstimateRecord, FrameRecord, MovementRecord, RunInfo
 
 DIGITS = 9
@@ -39,6 +44,14 @@ def _bearing_deg(b: float | None) -> float | None:
 def _estimate(e: EstimateRecord) -> dict[str, Any]:
     c = e.cov_fl
     return {"mean": _xy(e.mean_fl), "cov": [_xy(c[0]), _xy(c[1])]}
+
+
+def _shared_classes(landmarks: Sequence[LandmarkSpec]) -> dict[str, list[str]]:
+    """Class label -> catalog names, for the classes several landmarks share."""
+    by_label: dict[str, list[str]] = {}
+    for lm in landmarks:
+        by_label.setdefault(lm.label, []).append(lm.name)
+    return {label: names for label, names in by_label.items() if len(names) > 1}
 
 
 class SummarySink:
@@ -67,6 +80,9 @@ class SummarySink:
             "movements": [],
             "landmarks": {},
         }
+        shared = _shared_classes(s.landmarks)
+        if shared:
+            self.document["ambiguous_classes"] = shared
         if run.truth is not None:
             self.document["truth"] = {
                 "unit_m": _num(run.truth.to_fl.unit_m),
@@ -102,6 +118,8 @@ class SummarySink:
         if record.divergence:
             entry["divergence"] = record.divergence
             self._reinitializations += 1
+        if record.ambiguous_landmarks:
+            entry["ambiguous_landmarks"] = dict(record.ambiguous_landmarks)
         if record.ok:
             self._landmarks = {
                 name: _estimate(e) for name, e in record.estimates.items() if name not in reference

@@ -127,3 +127,62 @@ def test_decode_speed(benchmark: Any, size: tuple[int, int], model: str) -> None
         f"\n{size[0]}x{size[1]} {model:9s} decode (base64+png, {len(text) / 1e3:.0f} kB) "
         f"{median * 1e6:8.0f} us = {1 / median:6.0f} frames/s; {median / yardstick:5.1f}x cvtColor"
     )
+
+
+N_CODED = (4, 8, 16, 32)
+CODED_SIZES = {"unwrapped": (960, 160), "omni": (480, 480)}
+
+
+@cache
+def _coded_setup(model: str, n: int) -> tuple[np.ndarray, BearingExtractor]:
+    """A frame from the middle of a 3 x 2 m arena with ``n`` coded landmarks, and its extractor."""
+    from recorder.sim.coded import coded_landmarks
+    from recorder.sim.world import Arena, Landmark, SimWorld
+
+    docs = coded_landmarks(3.0, 2.0, n, np.random.default_rng(n))
+    landmarks = tuple(
+        Landmark(d["name"], d["x"], d["y"], None, bands=tuple(d["bands"])) for d in docs
+    )
+    world = SimWorld(Arena(3.0, 2.0), landmarks)
+    cal = _calibration(model, CODED_SIZES[model])
+    xy = min(
+        ((x, y) for x in np.linspace(1.2, 1.8, 7) for y in np.linspace(0.8, 1.2, 5)),
+        key=lambda p: -np.hypot(*(world.xy_world - p).T).min(),
+    )
+    frame = render_panorama(
+        (*xy, 0.3),
+        world,
+        cal,
+        np.random.default_rng(0),
+        bearing_noise_rad=0.0,
+        vision_error_rad=math.radians(3.0),
+        pixel_noise=2.0,
+        lighting=Lighting(),
+    )
+    catalog = [LandmarkSpec(lm.name, None, bands=lm.bands) for lm in landmarks]
+    return frame.image_bgr, BearingExtractor(cal, catalog)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_extract_cost_against_the_number_of_coded_landmarks(model: str) -> None:
+    """Median extract time with 4, 8, 16, 32 coded landmarks, each alternated with the
+    cvtColor yardstick of the same frame (ratios are comparable across runs)."""
+    lines = []
+    per_n = {}
+    for n in N_CODED:
+        image, extractor = _coded_setup(model, n)
+        seen = sum(d.visible for d in extractor.extract(image).values())
+        assert seen >= n // 2
+        ours, yard = [], []
+        for _ in range(15):
+            ours.append(_median_s(lambda ex=extractor, im=image: ex.extract(im), 0.05))
+            yard.append(_median_s(lambda im=image: cv2.cvtColor(im, cv2.COLOR_BGR2HSV), 0.02))
+        t, y = statistics.median(ours), statistics.median(yard)
+        per_n[n] = t / y
+        lines.append(
+            f"{model} {n:2d} codes ({seen:2d} read): {t * 1e3:6.2f} ms = {t / y:5.1f}x cvtColor, "
+            f"{t / n * 1e3:5.2f} ms per landmark"
+        )
+    print("\n" + "\n".join(lines))
+    # the cost per landmark must not grow with the number of landmarks
+    assert per_n[32] / 32 <= 1.5 * per_n[4] / 4

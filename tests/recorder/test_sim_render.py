@@ -250,3 +250,29 @@ def test_frames_are_reproducible_and_well_formed() -> None:
     assert a.shape == (176, 255, 3) and a.dtype == np.uint8
     assert np.array_equal(a, frame(1))
     assert not np.array_equal(a, frame(2))
+
+
+@pytest.mark.parametrize("cal", CALIBRATIONS, ids=lambda c: c.model)
+@pytest.mark.parametrize("bands", [("magenta", "yellow"), ("cyan", "red", "green")])
+def test_bands_are_painted_top_to_bottom_with_equal_heights(
+    cal: Calibration, bands: tuple[str, ...]
+) -> None:
+    """Unwrapped: the top band in the upper rows; omni: the top band outermost on the ray."""
+    world = SimWorld(ARENA, (Landmark("C", 0.7, 0.34, None, radius_m=0.02, bands=bands),))
+    frame = render_clean((0.4, 0.34, 0.0), world, cal, np.random.default_rng(0))
+    assert frame.truth[0].color == "-".join(bands)
+    if isinstance(cal, UnwrappedCalibration):
+        ys, _ = np.mgrid[0 : cal.height, 0 : cal.width]
+        height = ys.astype(float)  # grows downwards: from the top band to the bottom one
+    else:
+        ys, xs = np.mgrid[0 : cal.height, 0 : cal.width] + 0.5
+        height = -np.hypot(xs - cal.cx, ys - cal.cy)  # grows inwards
+    centres, sizes = [], []
+    for color in bands:
+        mask = hsv_mask(frame.image_bgr, color)
+        assert mask.sum() > 10, color
+        centres.append(float(np.median(height[mask])))
+        sizes.append(float(np.ptp(height[mask])))
+    assert centres == sorted(centres)
+    # equal heights on the cylinder: image extents agree within perspective (same elevation span)
+    assert max(sizes) < 2.0 * min(sizes)

@@ -1,0 +1,74 @@
+"""Landmarks that look alike: never mapped from a guess, reported per movement and in the summary;
+coded landmarks go through the whole pipeline (real simulator, ``bslam simulate`` / ``process``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+from logfactory import session_doc, write_log
+
+from recorder.sim.scenario import builtin_scenario
+from replay.cli import cli
+
+
+def _scenario(tmp_path: Path) -> Path:
+    doc = builtin_scenario("paper").to_dict()
+    doc["landmarks"][3]["color"] = "blue"  # L4 now looks like L3
+    doc["landmarks"].append(
+        {"name": "L5", "x": 0.55, "y": 0.12, "bands": ["magenta", "yellow"], "radius": 0.01}
+    )
+    path = tmp_path / "alike.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.fixture(scope="module")
+def alike(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], str]:
+    folder = tmp_path_factory.mktemp("alike")
+    log = folder / "alike.mcap"
+    sim = CliRunner().invoke(
+        cli, ["simulate", "--scenario", str(_scenario(folder)), "--out", str(log), "--seed", "3"]
+    )
+    assert sim.exit_code == 0, sim.output
+    summary = folder / "alike.summary.json"
+    result = CliRunner().invoke(cli, ["process", str(log), "--summary", str(summary)])
+    assert result.exit_code == 0, result.output
+    return json.loads(summary.read_text()), result.output
+
+
+def test_alike_landmarks_are_reported_not_guessed(alike: tuple[dict[str, Any], str]) -> None:
+    doc, output = alike
+    assert doc["ambiguous_classes"] == {"blue": ["L3", "L4"]}
+    assert "L3" not in doc["landmarks"] and "L4" not in doc["landmarks"]
+    flagged = 0
+    for move in doc["movements"]:
+        assert "L3" not in move["landmarks"] and "L4" not in move["landmarks"]
+        assert move["bearings_deg"]["L3"] == [None, None] == move["bearings_deg"]["L4"]
+        for name, reason in move.get("ambiguous_landmarks", {}).items():
+            assert name in ("L3", "L4") and "shared with" in reason and "blob" in reason
+            flagged += 1
+    assert flagged >= len(doc["movements"])  # seen in most keyframes, flagged every time
+    assert "not mapped, alike with no association: L3 L4 (blue)" in output
+    assert "L3, L4 not used (landmarks that look alike" in output
+
+
+def test_coded_landmark_is_mapped_through_the_pipeline(alike: tuple[dict[str, Any], str]) -> None:
+    doc, _ = alike
+    assert "L5" in doc["landmarks"]
+    assert doc["error_m"]["L5"] < 0.05
+    assert all(move["bearings_deg"]["L5"] != [None, None] for move in doc["movements"][:3])
+
+
+def test_a_log_whose_reference_shares_its_class_is_refused(tmp_path: Path) -> None:
+    doc = session_doc()
+    doc["landmarks"][2]["color"] = "red"  # L3 looks like the reference L1
+    log = write_log(tmp_path / "shared.mcap", doc=doc)
+    result = CliRunner().invoke(cli, ["process", str(log), "--summary", str(tmp_path / "s")])
+    assert result.exit_code == 1
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1, result.output
+    assert "reference landmark 'L1' shares its class 'red' with L3" in lines[0]
