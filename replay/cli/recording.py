@@ -60,7 +60,7 @@ def frame_options(func: F) -> F:
             click.option(
                 "--force",
                 is_flag=True,
-                help="If --out exists, move it aside (to NAME.old-N.mcap) instead of refusing.",
+                help="Replace an existing --out (record moves the old log to NAME.old-N.mcap).",
             ),
         )
     ):

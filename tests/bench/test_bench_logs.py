@@ -124,7 +124,7 @@ def _checked(path: Path) -> int:
         return sum(len(m.data) for m in log.messages())
 
 
-def _unchecked(path: Path) -> int:
+def _unchecked(path: Path, publish_times_ns: set[int] | None = None) -> int:
     """The in-place read before chunks were checked: per message, seek, header, data."""
     with path.open("rb") as f:
         summary = make_reader(f).get_summary()
@@ -136,8 +136,9 @@ def _unchecked(path: Path) -> int:
             p for c in index.channel_ids for p in index._places[c]
         ):
             f.seek(records_at + offset)
-            length = MESSAGE_HEADER.unpack(f.read(MESSAGE_HEADER.size))[1]
-            total += len(f.read(length - MESSAGE_FIELDS))
+            fields = MESSAGE_HEADER.unpack(f.read(MESSAGE_HEADER.size))
+            if publish_times_ns is None or fields[5] in publish_times_ns:
+                total += len(f.read(fields[1] - MESSAGE_FIELDS))
         return total
 
 
@@ -148,20 +149,7 @@ def _keyframes(path: Path, checked: bool) -> int:
         keys = set(sorted(times)[::10])
         if checked:
             return sum(len(m.data) for m in log.messages(publish_times_ns=keys))
-    with path.open("rb") as f:
-        summary = make_reader(f).get_summary()
-        assert summary is not None
-        index = LogIndex.of(f, summary)
-        assert index is not None
-        total = 0
-        for _, records_at, offset, _ in sorted(
-            p for c in index.channel_ids for p in index._places[c]
-        ):
-            f.seek(records_at + offset)
-            fields = MESSAGE_HEADER.unpack(f.read(MESSAGE_HEADER.size))
-            if fields[5] in keys:
-                total += len(f.read(fields[1] - MESSAGE_FIELDS))
-        return total
+    return _unchecked(path, keys)
 
 
 def _mcap(path: Path) -> int:

@@ -17,12 +17,13 @@ from typing import Any
 
 import pytest
 from click.testing import CliRunner
-from mcap.records import Channel, Message
+from mcap.records import Attachment, Channel, DataEnd, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, IndexType, Writer
 
-from data_schemas.mcap.chunks import McapChunkWriter
+from data_schemas.mcap.chunks import McapChunkWriter, serialise
 from data_schemas.mcap.info import log_summary
+from data_schemas.mcap.layout import MAGIC, RECORD_HEADER
 from data_schemas.mcap.read import LogReader
 from data_schemas.registry import MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json
 from replay.cli import cli
@@ -165,3 +166,85 @@ def test_process_maps_the_same_from_any_layout(
     doc = json.loads(out.read_text())
     assert doc["landmarks"] == original_doc["landmarks"]
     assert doc["movements"] == original_doc["movements"]
+
+
+def _hand_built(src: Path, dst: Path) -> None:
+    """Records laid out by hand: private records, top-level messages, no summary, an
+    attachment between messages, metadata last, and a footer that points at nothing."""
+    metadata, messages = _records(src)
+    parts = [MAGIC, serialise(Header(profile="", library="by hand"))]
+    parts.append(RECORD_HEADER.pack(0x80, 5) + b"hello")  # a private record: skipped
+    channels: dict[str, int] = {}
+    for i, m in enumerate(messages):
+        if m.topic not in channels:
+            schema_id = channel_id = len(channels) + 1
+            parts.append(
+                serialise(
+                    Schema(
+                        id=schema_id,
+                        name=m.schema,
+                        encoding=SCHEMA_ENCODING,
+                        data=schema_json(m.schema),
+                    )
+                )
+            )
+            parts.append(
+                serialise(
+                    Channel(
+                        id=channel_id,
+                        topic=m.topic,
+                        message_encoding=MESSAGE_ENCODING,
+                        schema_id=schema_id,
+                        metadata={},
+                    )
+                )
+            )
+            channels[m.topic] = channel_id
+        parts.append(
+            serialise(
+                Message(
+                    channel_id=channels[m.topic],
+                    sequence=m.sequence,
+                    log_time=m.log_time_ns,
+                    publish_time=m.publish_time_ns,
+                    data=m.data,
+                )
+            )
+        )
+        if i == 3:
+            parts.append(
+                serialise(
+                    Attachment(
+                        log_time=1,
+                        create_time=2,
+                        name="note.txt",
+                        media_type="text/plain",
+                        data=b"hi",
+                    )
+                )
+            )
+    for name, values in metadata.items():
+        parts.append(serialise(Metadata(name=name, metadata=values)))
+    parts.append(RECORD_HEADER.pack(0x81, 0))  # an empty private record
+    parts.append(serialise(DataEnd(data_section_crc=0)))
+    parts.append(serialise(Footer(summary_start=0, summary_offset_start=0, summary_crc=0)) + MAGIC)
+    dst.write_bytes(b"".join(parts))
+
+
+def test_hand_built_layout(small_log: Path, tmp_path: Path, original_doc: dict[str, Any]) -> None:
+    path = tmp_path / "hand.mcap"
+    _hand_built(small_log, path)
+    s = log_summary(path)
+    assert {c.topic: c.count for c in s.channels} == dict(_reference_counts(path))
+    assert s.state == "finished" and not s.indexed and s.chunk_count == 0
+    assert [a.name for a in s.attachments] == ["note.txt"]
+    out = tmp_path / "s.json"
+    result = CliRunner().invoke(cli, ["process", str(path), "--summary", str(out)])
+    assert result.exit_code == 0, result.output
+    assert json.loads(out.read_text())["landmarks"] == original_doc["landmarks"]
+    fixed = tmp_path / "fixed.mcap"
+    rec = CliRunner().invoke(cli, ["recover", str(path), str(fixed)])
+    assert rec.exit_code == 0, rec.output
+    again = log_summary(fixed)
+    assert again.indexed and again.message_count == s.message_count
+    assert [a.name for a in again.attachments] == ["note.txt"]

@@ -6,12 +6,17 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner, Result
 
 from data_schemas.errors import OutputError
+from data_schemas.mcap.read import LogReader
 from data_schemas.outputs import OutputGuard, move_aside
+from recorder.clock import SystemClock
+from recorder.sim.fake_khepera import FakeKhepera
 from replay.cli import cli
+from tests.replay.test_cli_record_info import _inputs
 
 
 def _run(*args: str | Path) -> Result:
@@ -157,3 +162,46 @@ def test_experiment_refuses_a_folder_of_earlier_results(tmp_path: Path) -> None:
     result = _run("experiment", "paper", "--out", tmp_path, "--runs", "1")
     _one_line_error(result, "holds earlier results; pass --force")
     assert (tmp_path / "results.json").read_text() == "{}"
+
+
+def _record(inputs: dict[str, str], out: Path, *extra: str) -> Result:
+    fake = FakeKhepera(SystemClock(), np.random.default_rng(0))
+    with fake.serve_pty() as server:
+        return _run(
+            "record",
+            "--port",
+            server.path,
+            "--camera",
+            inputs["camera"],
+            "--out",
+            out,
+            "--calibration",
+            inputs["cal"],
+            "--landmarks",
+            inputs["lms"],
+            "--moves",
+            "1",
+            "--distance",
+            "0.02",
+            "--turn-deg",
+            "10",
+            *extra,
+        )
+
+
+def test_record_never_overwrites_a_log(tmp_path: Path) -> None:
+    inputs = _inputs(tmp_path, frames=20)
+    out = tmp_path / "run.mcap"
+    first = _record(inputs, out)
+    assert first.exit_code == 0, first.output
+    session = out.read_bytes()
+    _one_line_error(_record(inputs, out), f"{out} exists: pass --force")
+    assert out.read_bytes() == session
+    forced = _record(inputs, out, "--force")
+    assert forced.exit_code == 0, forced.output
+    aside = tmp_path / "run.old-1.mcap"
+    assert f"moved the existing {out} aside to {aside}" in forced.output
+    assert aside.read_bytes() == session and out.read_bytes() != session
+    with LogReader(out) as reader:  # the new session, finished
+        assert reader.finished
+    _one_line_error(_record(inputs, Path(inputs["cal"]), "--force"), "is the input")
