@@ -272,7 +272,7 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
         return ScenarioError(f"{what}: key {key!r}: {message}")
 
     arena = Arena(float(doc["arena"]["width"]), float(doc["arena"]["height"]))
-    landmarks = []
+    landmarks: list[Landmark] = []
     seen: set[str] = set()
     for i, d in enumerate(doc["landmarks"]):
         key = f"landmarks[{i}]"
@@ -295,6 +295,13 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
                 f"landmark {lm.name} at ({lm.x:g}, {lm.y:g}) m is outside the "
                 f"{arena.width_m:g} x {arena.height_m:g} m arena",
             )
+        for other in landmarks:
+            if math.hypot(lm.x - other.x, lm.y - other.y) < lm.radius_m + other.radius_m:
+                raise fail(
+                    key,
+                    f"landmark {lm.name} at ({lm.x:g}, {lm.y:g}) m overlaps landmark "
+                    f"{other.name} at ({other.x:g}, {other.y:g}) m; move one of them apart",
+                )
         landmarks.append(lm)
 
     ref = doc["reference"]

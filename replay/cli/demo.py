@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from replay.cli.options import SEED
+
 
 @click.command("demo")
 @click.option(
@@ -18,7 +20,7 @@ import click
 )
 @click.option(
     "--seed",
-    type=int,
+    type=SEED,
     default=7,
     show_default=True,
     help="Seed of the simulated trajectory and of the estimator.",

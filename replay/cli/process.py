@@ -11,10 +11,15 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from replay.cli.options import SEED
+
 if TYPE_CHECKING:
     from replay.records import MethodConfig
 
 PRIOR_CHOICES = ("impartial", "gaussian", "mixture")
+#: Largest particle counts: FR keeps n_r^2 observation points per movement (2000: 64 MB).
+MAX_N_R = 2_000
+MAX_N_L = 100_000
 
 
 def method_options(fn: click.decorators.FC) -> click.decorators.FC:
@@ -30,21 +35,21 @@ def method_options(fn: click.decorators.FC) -> click.decorators.FC:
             ),
             click.option(
                 "--n-r",
-                type=click.IntRange(2),
+                type=click.IntRange(2, MAX_N_R),
                 default=50,
                 show_default=True,
                 help="Particles per landmark in FR.",
             ),
             click.option(
                 "--n-l",
-                type=click.IntRange(2),
+                type=click.IntRange(2, MAX_N_L),
                 default=300,
                 show_default=True,
                 help="Particles per landmark in FL.",
             ),
             click.option(
                 "--seed",
-                type=int,
+                type=SEED,
                 default=0,
                 show_default=True,
                 help="Seed of the estimator's random generator.",

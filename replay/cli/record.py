@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
+from replay.cli.options import SEED, FiniteFloat
 from replay.cli.recording import frame_options
 
 
-def _distance_range(text: str) -> tuple[float, float]:
+def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tuple[float, float]:
     parts = text.split(",")
     try:
         values = [float(p) for p in parts]
@@ -15,7 +18,7 @@ def _distance_range(text: str) -> tuple[float, float]:
         raise click.BadParameter(f"expected D or MIN,MAX in metres, got {text!r}") from None
     if len(values) == 1:
         values = values * 2
-    if len(values) != 2 or not 0 < values[0] <= values[1]:
+    if len(values) != 2 or not 0 < values[0] <= values[1] < math.inf:
         raise click.BadParameter(f"expected D or MIN,MAX with 0 < MIN <= MAX, got {text!r}")
     return values[0], values[1]
 
@@ -49,16 +52,20 @@ def _distance_range(text: str) -> tuple[float, float]:
     "--distance",
     default="0.10,0.25",
     show_default=True,
+    callback=_distance_range,
     help="Straight distance D or range MIN,MAX, metres.",
 )
 @click.option(
-    "--turn-deg", type=float, default=None, help="Fixed turn before each drive (default random)."
+    "--turn-deg",
+    type=FiniteFloat(),
+    default=None,
+    help="Fixed turn before each drive (default random).",
 )
-@click.option("--seed", type=int, default=None, help="Seed of the random turns and distances.")
+@click.option("--seed", type=SEED, default=None, help="Seed of the random turns and distances.")
 @frame_options
 @click.option(
     "--baud",
-    type=int,
+    type=click.IntRange(min=1),
     default=9600,
     show_default=True,
     help="Serial baud rate of the robot's running mode (Khepera II: 9600 to 115200).",
@@ -66,9 +73,19 @@ def _distance_range(text: str) -> tuple[float, float]:
 @click.option(
     "--model", default="khepera2", show_default=True, help="Robot model name (for the log)."
 )
-@click.option("--mm-per-pulse", type=float, default=0.08, show_default=True, help="Encoder scale.")
 @click.option(
-    "--wheel-base", type=float, default=0.053, show_default=True, help="Wheel base, metres."
+    "--mm-per-pulse",
+    type=FiniteFloat(min=0, min_open=True),
+    default=0.08,
+    show_default=True,
+    help="Encoder scale.",
+)
+@click.option(
+    "--wheel-base",
+    type=FiniteFloat(min=0, min_open=True),
+    default=0.053,
+    show_default=True,
+    help="Wheel base, metres.",
 )
 def record(
     port: str,
@@ -77,7 +94,7 @@ def record(
     calibration: str,
     landmarks: str,
     moves: int,
-    distance: str,
+    distance: tuple[float, float],
     turn_deg: float | None,
     seed: int | None,
     frame_rate_hz: float,
@@ -92,8 +109,6 @@ def record(
 
     Ctrl-C (or SIGTERM) stops the motors and finishes the log cleanly (exit 130 / 143).
     """
-    import math
-
     import numpy as np
 
     from recorder.camera import OpenCVCamera
@@ -105,7 +120,7 @@ def record(
     from recorder.timebase import EpochClock
     from replay.cli.recording import run_recording
 
-    distance_m = _distance_range(distance)
+    distance_m = distance
     cal = load_calibration_file(calibration)
     catalog = load_landmark_file(landmarks)
     config = RobotConfig(

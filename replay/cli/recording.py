@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from replay.cli.options import FiniteFloat
+
 if TYPE_CHECKING:
     from recorder.record import Progress, RecordResult
 
@@ -25,7 +27,7 @@ def frame_options(func: F) -> F:
             click.option(
                 "--rate",
                 "frame_rate_hz",
-                type=click.FloatRange(min=0, min_open=True),
+                type=FiniteFloat(min=0, min_open=True),
                 default=5.0,
                 show_default=True,
                 help="Frames per second while driving (virtual time when simulating).",

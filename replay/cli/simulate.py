@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from replay.cli.options import SEED, FiniteFloat
 from replay.cli.recording import frame_options
 
 
@@ -15,18 +16,18 @@ from replay.cli.recording import frame_options
     help="Scenario JSON file, or a built-in name (paper, paper_omni).",
 )
 @click.option("--out", required=True, type=click.Path(dir_okay=False), help="Log to write.")
-@click.option("--seed", type=int, default=None, help="Replaces the scenario's trajectory.seed.")
+@click.option("--seed", type=SEED, default=None, help="Replaces the scenario's trajectory.seed.")
 @frame_options
 @click.option(
     "--turn-noise",
-    type=click.FloatRange(min=0),
+    type=FiniteFloat(min=0),
     default=0.02,
     show_default=True,
     help="Actuation noise: relative std of each turn.",
 )
 @click.option(
     "--distance-noise",
-    type=click.FloatRange(min=0),
+    type=FiniteFloat(min=0),
     default=0.02,
     show_default=True,
     help="Actuation noise: relative std of each straight distance.",

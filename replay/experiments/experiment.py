@@ -20,11 +20,10 @@ from replay.experiments import plots
 from replay.experiments.geometry import describe, scored_landmarks
 from replay.experiments.protocol import (
     PROTOCOL_PARAMS,
-    SWEEP_PARAMS,
     Protocol,
-    ProtocolError,
     apply_protocol_param,
     apply_scenario_param,
+    check_sweep_values,
 )
 from replay.experiments.report import write_report, write_sweep_report
 from replay.experiments.results import CRB, Results, RunRecord, write_results
@@ -121,6 +120,10 @@ def paper_experiment(
     info = {"command": command, "workers": workers, "scheduler": scheduler, "stage_s": stages}
     info["runs_s"] = round(time.perf_counter() - start, 2)
     results = Results("paper", _config(protocol, doc), records, rows, info)
+    if not rows:  # every run failed: the results file says why, there is nothing to draw
+        results.info["elapsed_s"] = round(time.perf_counter() - start, 2)
+        write_results(results, out_dir)
+        return results
     figures = render_paper(results, out_dir)
     results.info["elapsed_s"] = round(time.perf_counter() - start, 2)
     write_results(results, out_dir)
@@ -176,23 +179,25 @@ def sweep_experiment(
     command: str = "",
 ) -> Results:
     """One group of runs per value of ``param``; results, a sweep figure, table and report."""
+    from recorder.sim.scenario import scenario_from_dict
+
     start = time.perf_counter()
-    tasks: list[RunTask] = []
-    for value in values:
+    check_sweep_values(param, list(values))
+    groups: list[tuple[str, Protocol, dict[str, Any]]] = []
+    for value in values:  # every value is checked before any folder is made
         group = f"{param}={value}"
         proto, doc = protocol, None
         if param == "camera_model":
             doc = scenario_doc({"unwrapped": "paper", "omni": "paper_omni"}.get(value, value))
         elif param in PROTOCOL_PARAMS:
             proto = apply_protocol_param(protocol, param, value)
-        elif param in SWEEP_PARAMS:
-            doc = apply_scenario_param(scenario_doc(scenario), param, float(value))
         else:
-            known = ", ".join([*SWEEP_PARAMS, *PROTOCOL_PARAMS])
-            raise ProtocolError(f"unknown sweep parameter {param!r}; use one of {known}")
-        tasks += plan_runs(
-            replace(proto, n_l_values=()), doc or scenario_doc(scenario), out_dir, group
-        )
+            doc = apply_scenario_param(scenario_doc(scenario), param, float(value))
+            scenario_from_dict(doc, what=f"scenario with {group}")
+        groups.append((group, replace(proto, n_l_values=()), doc or scenario_doc(scenario)))
+    tasks: list[RunTask] = []
+    for group, proto, doc in groups:
+        tasks += plan_runs(proto, doc, out_dir, group)
     records, rows, stages = run_all(
         tasks, workers=workers, scheduler=scheduler, progress=progress, desc=f"sweep {param}"
     )
@@ -202,6 +207,8 @@ def sweep_experiment(
     results = Results(f"sweep of {param}", config, records, rows, info)
     results.info["elapsed_s"] = round(time.perf_counter() - start, 2)
     write_results(results, out_dir)
+    if not rows:  # every run failed: the results file says why, there is nothing to draw
+        return results
     final = results.config["protocol"]["movements"]
     early = min(results.config["protocol"]["n_l_movements"], final)
     name = plots.sweep(results, out_dir / f"sweep_{param}.png", sorted({early, final})).name
