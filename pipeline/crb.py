@@ -1,4 +1,4 @@
-"""Cramér–Rao bound for bearing-only triangulation (METHOD.md section 8).
+"""Cramér–Rao bound for bearing-only triangulation (docs/method.md, part 8).
 
 Fisher information of a landmark at ``x`` from bearings taken at known points ``o_i`` with
 independent noise of std ``sigma``: ``J = sum n_i n_i^T / (sigma^2 r_i^2)``, ``n_i`` the unit

@@ -109,53 +109,33 @@ def record(
 
     Ctrl-C (or SIGTERM) stops the motors and finishes the log cleanly (exit 130 / 143).
     """
-    import numpy as np
-
-    from recorder.camera import OpenCVCamera
-    from recorder.clock import SystemClock
-    from recorder.moves import random_moves
-    from recorder.record import CommandSink, RecordSettings, Rig, record_to_file
-    from recorder.robot import KheperaRobot, RobotConfig
-    from recorder.session import build_session_doc, load_calibration_file, load_landmark_file
-    from recorder.timebase import EpochClock
+    from recorder.record import RecordSettings
+    from recorder.start import RobotSessionSpec, record_robot_session
     from replay.cli.recording import run_recording
 
-    distance_m = distance
-    cal = load_calibration_file(calibration)
-    catalog = load_landmark_file(landmarks)
-    config = RobotConfig(
-        port=port, model=model, baudrate=baud, mm_per_pulse=mm_per_pulse, wheel_base_m=wheel_base
+    spec = RobotSessionSpec(
+        port=port,
+        camera_source=camera_source,
+        calibration_file=calibration,
+        landmark_file=landmarks,
+        moves=moves or None,
+        distance_m=distance,
+        turn_rad=None if turn_deg is None else math.radians(turn_deg),
+        seed=seed,
+        robot={
+            "model": model,
+            "baudrate": baud,
+            "mm_per_pulse": mm_per_pulse,
+            "wheel_base_m": wheel_base,
+        },
+        settings=RecordSettings(
+            frame_rate_hz=frame_rate_hz,
+            encoding="png" if encoding == "png" else "bgr8",
+            png_level=png_level,
+        ),
     )
-    settings = RecordSettings(
-        frame_rate_hz=frame_rate_hz,
-        encoding="png" if encoding == "png" else "bgr8",
-        png_level=png_level,
+    run_recording(
+        out,
+        lambda progress: record_robot_session(out, spec, progress=progress),
+        total=moves or None,
     )
-    clock = EpochClock(SystemClock())
-    camera = OpenCVCamera(camera_source, cal)
-    try:
-        sink = CommandSink()
-        with KheperaRobot.open(config, clock, on_exchange=sink) as robot:
-            robot.version()  # the robot answers before the log is created
-            doc = build_session_doc(
-                created_unix_ns=clock.start_wall_ns,
-                robot=config.session_dict(),
-                camera_source=camera_source,
-                calibration=cal,
-                frame_rate_hz=frame_rate_hz,
-                encoding=settings.encoding,
-                landmarks=catalog.landmarks,
-                reference=catalog.reference,
-                vision_error_rad=catalog.vision_error_rad,
-                extra={"recorder": {"png_level": png_level, "seed": seed}},
-            )
-            turn_rad = None if turn_deg is None else math.radians(turn_deg)
-            plan = random_moves(np.random.default_rng(seed), moves or None, distance_m, turn_rad)
-            rig = Rig(robot=robot, sink=sink, camera=camera, clock=clock)
-            run_recording(
-                out,
-                lambda progress: record_to_file(out, doc, rig, plan, settings, progress=progress),
-                total=moves or None,
-            )
-    finally:
-        camera.close()

@@ -70,7 +70,9 @@ def run_recording(
 
     from recorder.record import RecordingInterrupted
 
-    with tqdm(total=total, unit="move", file=sys.stderr, desc="recording") as bar:
+    # delay: a session that fails at once (a bad file, no robot) leaves one line, no bar
+    bar = tqdm(total=total, unit="move", file=sys.stderr, desc="recording", delay=0.5)
+    with bar:
 
         def progress(p: Progress) -> None:
             bar.update(p.movements - bar.n)

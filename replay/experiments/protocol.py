@@ -1,6 +1,6 @@
 """The experiment protocol: what a run does (methods, particle counts) and what it varies.
 
-:class:`Protocol` defaults are the paper's (METHOD.md section 7): 40 runs of 10 straight
+:class:`Protocol` defaults are the paper's (docs/method.md, part 7): 40 runs of 10 straight
 movements, n_r = 50, n_l = 300, eps = 3°, four landmarks with |L1 L2| = 30 cm in a 105 x 68 cm
 arena (the geometry lives in the scenario). A sweep changes one :data:`SWEEP_PARAMS` entry.
 """

@@ -86,7 +86,11 @@ def render_one(
 
 @pytest.mark.parametrize(
     ("cal", "n_poses"),
-    [(CALIBRATIONS[0], 12), (CALIBRATIONS[1], 12), (UnwrappedCalibration(1920, 960), 2)],
+    [
+        (CALIBRATIONS[0], 12),
+        (CALIBRATIONS[1], 12),
+        pytest.param(UnwrappedCalibration(1920, 960), 2, marks=pytest.mark.slow),
+    ],
     ids=["unwrapped", "omni", "unwrapped-1920x960"],
 )
 def test_centroid_matches_drawn_bearing(cal: Calibration, n_poses: int) -> None:

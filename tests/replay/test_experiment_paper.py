@@ -18,6 +18,7 @@ needs_simulate = pytest.mark.skipif(
 )
 
 
+@pytest.mark.slow
 @needs_simulate
 def test_tiny_paper_experiment_end_to_end(tmp_path: Path) -> None:
     out = tmp_path / "exp"

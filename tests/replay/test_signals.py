@@ -59,6 +59,7 @@ def _stop(proc: subprocess.Popen[str], signum: int) -> str:
     return err
 
 
+@pytest.mark.slow  # about 5 s: the experiment's imports before its workers start
 def test_sigterm_to_experiment_with_workers(tmp_path: Path) -> None:
     signum = signal.SIGTERM
     args = ["experiment", "paper", "--out", str(tmp_path / "exp"), "--runs", "40"]
@@ -68,7 +69,9 @@ def test_sigterm_to_experiment_with_workers(tmp_path: Path) -> None:
     assert "terminated" in re.split(r"[\r\n]", err)  # --quiet: no bar
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.parametrize(
+    "signum", [signal.SIGTERM, pytest.param(signal.SIGINT, marks=pytest.mark.slow)]
+)
 def test_stop_process_with_workers(tmp_path: Path, signum: int) -> None:
     logs = tmp_path / "logs"
     logs.mkdir()
