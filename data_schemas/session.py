@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from data_schemas.calibration import Calibration, calibration_from_dict
+from data_schemas.catalog import catalog_problem
 from data_schemas.codec import validate
 from data_schemas.errors import MissingMetadataError, SchemaError
 
@@ -71,15 +72,10 @@ class Session:
 def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> Session:
     """Validate a session document and build its typed view (raise SchemaError)."""
     validate("bslam.Session", doc, what=what)
-    names = [lm["name"] for lm in doc["landmarks"]]
-    if len(set(names)) != len(names):
-        raise SchemaError(f"{what}: field 'landmarks': landmark names must be unique, got {names}")
     ref = doc["reference"]
-    for r in ref:
-        if r not in names:
-            raise SchemaError(f"{what}: field 'reference': {r!r} is not in the landmark catalog")
-    if ref[0] == ref[1]:
-        raise SchemaError(f"{what}: field 'reference': the two reference landmarks must differ")
+    problem = catalog_problem([lm["name"] for lm in doc["landmarks"]], ref)
+    if problem is not None:
+        raise SchemaError(f"{what}: field {problem[0]!r}: {problem[1]}")
     specs = []
     for lm in doc["landmarks"]:
         hsv = lm.get("hsv")

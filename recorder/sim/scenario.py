@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from data_schemas.calibration import Calibration, UnwrappedCalibration, default_omni
+from data_schemas.catalog import catalog_problem
 from data_schemas.codec import validate
 from data_schemas.errors import ScenarioError, SchemaError
 from recorder.moves import Move
@@ -272,13 +273,13 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
         return ScenarioError(f"{what}: key {key!r}: {message}")
 
     arena = Arena(float(doc["arena"]["width"]), float(doc["arena"]["height"]))
+    ref = doc["reference"]
+    problem = catalog_problem([d["name"] for d in doc["landmarks"]], ref)
+    if problem is not None:
+        raise fail(*problem)
     landmarks: list[Landmark] = []
-    seen: set[str] = set()
     for i, d in enumerate(doc["landmarks"]):
         key = f"landmarks[{i}]"
-        if d["name"] in seen:
-            raise fail(f"{key}.name", f"duplicate landmark name {d['name']!r}")
-        seen.add(d["name"])
         lm = Landmark(
             d["name"],
             float(d["x"]),
@@ -303,13 +304,6 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
                     f"{other.name} at ({other.x:g}, {other.y:g}) m; move one of them apart",
                 )
         landmarks.append(lm)
-
-    ref = doc["reference"]
-    for r in ref:
-        if r not in seen:
-            raise fail("reference", f"{r!r} is not a landmark name (have {sorted(seen)})")
-    if ref[0] == ref[1]:
-        raise fail("reference", f"the two reference landmarks must differ, got {ref}")
 
     cam = doc["camera"]
     camera = CameraSpec(

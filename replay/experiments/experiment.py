@@ -14,8 +14,6 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from replay.experiments import plots
 from replay.experiments.geometry import describe, scored_landmarks
 from replay.experiments.protocol import (
@@ -150,20 +148,13 @@ def render_paper(results: Results, out_dir: Path) -> dict[str, str]:
 
 def fig1(results: Results, path: Path) -> Path:
     """The three priors of one bearing (eps of the experiment), as in the paper's Fig. 1."""
-    from pipeline.priors import make_prior, prior_density_grid, range_marginal
-    from replay.fig1 import N_ANGLE, R_MAX, R_MIN
+    from replay.fig1 import fig1_data
 
     eps_rad = math.radians(float(results.config["scenario"]["vision_error_deg"]))
-    half = R_MAX * math.tan(1.6 * eps_rad)
-    xs = np.linspace(0.0, R_MAX, 240)
-    ys = np.linspace(-half, half, 120)
-    r = np.linspace(R_MIN, R_MAX, 80)
-    densities, marginals = {}, {}
-    for name in ("impartial", "gaussian", "mixture"):
-        densities[name] = prior_density_grid(name, 0.0, eps_rad, R_MIN, R_MAX, xs, ys)
-        prior = make_prior(name, eps_rad, R_MIN, R_MAX)
-        marginals[name] = range_marginal(prior, r, n_angle=N_ANGLE)
-    return plots.fig1_priors(xs, ys, densities, r, marginals, path)
+    fig = fig1_data(eps_rad, nx=240, ny=120, nr=80)
+    ys = fig.ys[::-1]  # the plot's y axis points up
+    densities = {name: d[::-1] for name, d in fig.densities.items()}
+    return plots.fig1_priors(fig.xs, ys, densities, fig.r, fig.marginals, path)
 
 
 def sweep_experiment(
