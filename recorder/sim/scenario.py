@@ -46,6 +46,7 @@ from data_schemas.calibration import Calibration, UnwrappedCalibration, default_
 from data_schemas.catalog import catalog_problem
 from data_schemas.codec import validate
 from data_schemas.errors import ScenarioError, SchemaError
+from data_schemas.registry import schema_dict
 from recorder.moves import Move
 from recorder.sim.world import Arena, Landmark, Pose, SimWorld
 
@@ -59,25 +60,26 @@ CLEARANCE_M = 0.04
 
 BUILTIN_SCENARIOS: tuple[str, ...] = ("paper", "paper_omni")
 
-# Allowed keys per object (the schema's properties; checked first for "did you mean" hints).
-_KEYS: dict[str, tuple[str, ...]] = {
-    "": (
-        "description",
-        "arena",
-        "landmarks",
-        "reference",
-        "camera",
-        "vision_error_deg",
-        "trajectory",
-        "robot",
-    ),
-    "arena": ("width", "height"),
-    "landmarks[]": ("name", "x", "y", "color", "radius", "height"),
-    "camera": ("model", "width", "height", "bearing_noise_deg", "pixel_noise", "lighting"),
-    "trajectory": ("start", "moves", "distance", "seed"),
-    "trajectory.moves[]": ("turn_deg", "distance"),
-    "robot": ("radius",),
-}
+
+def _allowed_keys() -> dict[str, tuple[str, ...]]:
+    """Allowed keys per object, read from the ``bslam.Scenario`` schema (checked before the
+    schema itself, to give "did you mean" hints): "" is the top level, "landmarks[]" an item."""
+    schema = schema_dict("bslam.Scenario")
+    props = schema["properties"]
+    moves = next(b for b in props["trajectory"]["properties"]["moves"]["oneOf"] if "items" in b)
+    objects = {
+        "": schema,
+        "arena": props["arena"],
+        "landmarks[]": props["landmarks"]["items"],
+        "camera": props["camera"],
+        "trajectory": props["trajectory"],
+        "trajectory.moves[]": moves["items"],
+        "robot": props["robot"],
+    }
+    return {name: tuple(obj["properties"]) for name, obj in objects.items()}
+
+
+_KEYS = _allowed_keys()
 
 
 @dataclass(frozen=True)
