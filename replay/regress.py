@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import shlex
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,7 +93,8 @@ def load_expected(case: Case) -> dict[str, Any]:
     if problem is not None:
         raise ExpectedFileError(
             f"{case.expected}: {problem}; it is not a summary written by bslam; restore it "
-            f"(git checkout) or rewrite it with 'bslam regress {case.log.parent} --update'"
+            f"(git checkout) or rewrite it with "
+            f"{shlex.join(['bslam', 'regress', str(case.log.parent), '--update'])}"
         )
     result: dict[str, Any] = doc
     return result

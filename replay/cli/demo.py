@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 
 import click
@@ -68,4 +69,4 @@ def demo(out_dir: Path, seed: int, omni: bool) -> None:
     click.echo(f"  derived log    {derived}")
     click.echo(f"  summary        {summary}")
     click.echo(f"  Rerun          {rrd}")
-    click.echo(f"open the replay with:  {viewer_command()} {rrd}")
+    click.echo(f"open the replay with:  {shlex.join([viewer_command(), str(rrd)])}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import time
 from pathlib import Path
 
@@ -66,7 +67,7 @@ def replay(
                 rec.disconnect()
     click.echo(f"{log}: {result_line(doc)}")
     if save:
-        click.echo(f"wrote {save}; open it with: {viewer_command()} {save}")
+        click.echo(f"wrote {save}; open it with: {shlex.join([viewer_command(), str(save)])}")
     if serve:
         import rerun as rr
 

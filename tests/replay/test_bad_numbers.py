@@ -379,3 +379,25 @@ def test_experiment_exits_1_when_no_run_succeeds(
     assert code == 1 and len(lines) == 1, lines
     assert "no run succeeded: all 2 failed" in lines[0] and "the simulator is broken" in lines[0]
     assert json.loads((out / "results.json").read_text())["runs"][0]["status"].startswith("failed")
+
+
+def test_printed_commands_are_shell_quoted(tmp_path: Path, small_log: Path) -> None:
+    import shlex
+
+    rrd = tmp_path / "my run's replay.rrd"
+    code, lines = invoke(["replay", str(small_log), "--save", str(rrd)])
+    assert code == 0, lines
+    hint = next(line for line in lines if "open it with: " in line).split("open it with: ")[1]
+    assert shlex.split(hint)[1:] == [str(rrd)]
+    folder = tmp_path / "stored logs"
+    folder.mkdir()
+    (folder / "a.mcap").write_bytes(small_log.read_bytes())
+    (folder / "a.expected.json").write_text("[]")
+    code, lines = invoke(["regress", str(folder)])
+    assert code == 1
+    assert shlex.split(lines[0].split("rewrite it with ")[1]) == [
+        "bslam",
+        "regress",
+        str(folder),
+        "--update",
+    ]
