@@ -101,3 +101,35 @@ def test_sigterm_to_simulate_finishes_the_log(tmp_path: Path) -> None:
     from recorder.logread import log_summary
 
     assert log_summary(out).finished
+
+
+@pytest.mark.parametrize(
+    ("target", "args"),
+    [
+        ("replay.process.process_log", ["process", "{log}"]),
+        ("replay.rerun_out.replay_log", ["replay", "{log}", "--save", "{tmp}/o.rrd"]),
+        ("replay.regress.run_regression", ["regress", "{regress}"]),
+        (
+            "recorder.sim.simulate.simulate_to_file",
+            ["simulate", "--scenario", "paper", "--out", "{tmp}/s.mcap"],
+        ),
+        ("recorder.logread.log_summary", ["info", "{log}"]),
+    ],
+)
+def test_ctrl_c_exits_130_everywhere(
+    tmp_path: Path, small_log: Path, monkeypatch: pytest.MonkeyPatch, target: str, args: list[str]
+) -> None:
+    """Ctrl-C wherever a command is: one line, exit 130, no traceback (CliRunner)."""
+    from click.testing import CliRunner
+
+    from replay.cli import cli
+
+    def interrupted(*a: object, **k: object) -> None:
+        raise KeyboardInterrupt
+
+    module, name = target.rsplit(".", 1)
+    monkeypatch.setattr(f"{module}.{name}", interrupted)
+    fill = {"log": str(small_log), "tmp": str(tmp_path), "regress": str(REGRESS)}
+    result = CliRunner().invoke(cli, [a.format(**fill) for a in args])
+    assert result.exit_code == 130, result.output
+    assert [line for line in result.output.splitlines() if line.strip()] == ["interrupted"]
