@@ -12,11 +12,13 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from replay.cli.options import SEED
+from replay.experiments.protocol import PRIORS
 
 if TYPE_CHECKING:
     from replay.records import MethodConfig
 
-PRIOR_CHOICES = ("impartial", "gaussian", "mixture")
+#: the prior names without importing numpy for --help (the same tuple as the experiments')
+PRIOR_CHOICES = PRIORS
 #: Largest particle counts: FR keeps n_r^2 observation points per movement (2000: 64 MB).
 MAX_N_R = 2_000
 MAX_N_L = 100_000

@@ -14,6 +14,8 @@ from typing import Any
 
 from data_schemas.errors import BslamError
 
+#: pipeline.priors.PriorName's values, spelled out here so that the CLI's option list (which
+#: imports this module) needs no numpy; tests/replay/test_experiment_paper.py checks they agree
 PRIORS = ("impartial", "gaussian", "mixture")
 FRAME_CHANGES = ("sampled", "exact")
 #: the paper's Fig. 8 particle counts

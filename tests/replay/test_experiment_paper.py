@@ -234,3 +234,14 @@ def test_run_that_cannot_be_simulated_is_reported_in_one_line(tmp_path: Path) ->
     assert not outcome.ok and outcome.error is not None
     assert outcome.error.startswith("move 0: no turn and distance in [1.6, 2.4] m")
     assert "trajectory.distance" in outcome.error and "\n" not in outcome.error
+
+
+def test_prior_names_agree_with_the_estimator() -> None:
+    from typing import get_args
+
+    from pipeline.priors import PriorName
+    from replay.cli.process import PRIOR_CHOICES
+    from replay.experiments.protocol import PRIORS
+    from replay.records import PRIORS as RECORD_PRIORS
+
+    assert PRIORS == PRIOR_CHOICES == RECORD_PRIORS == get_args(PriorName)
