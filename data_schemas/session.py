@@ -64,10 +64,6 @@ class Session:
         """Catalog names in order."""
         return [lm.name for lm in self.landmarks]
 
-    def to_json(self) -> str:
-        """The document as JSON text (what goes into the metadata record)."""
-        return json.dumps(self.doc, separators=(",", ":"))
-
 
 def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> Session:
     """Validate a session document and build its typed view (raise SchemaError)."""
