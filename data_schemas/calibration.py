@@ -121,6 +121,19 @@ class OmniCalibration:
                 f"omni calibration needs 0 <= r_min < r_max, got r_min={self.r_min}, "
                 f"r_max={self.r_max}"
             )
+        if not (0 <= self.cx <= self.width and 0 <= self.cy <= self.height):
+            raise CalibrationError(
+                f"omni calibration centre ({self.cx:g}, {self.cy:g}) is outside the "
+                f"{self.width}x{self.height} image; give cx, cy of the mirror in pixels"
+            )
+        corner_px = math.hypot(
+            max(self.cx, self.width - self.cx), max(self.cy, self.height - self.cy)
+        )
+        if self.r_min >= corner_px:
+            raise CalibrationError(
+                f"omni calibration ring r_min={self.r_min:g} px lies outside the "
+                f"{self.width}x{self.height} image; give r_min and r_max in pixels"
+            )
 
     def bearing_of_pixel(
         self, x: NDArray[np.floating] | float, y: NDArray[np.floating] | float

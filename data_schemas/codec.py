@@ -8,18 +8,21 @@ Validation errors are :class:`~data_schemas.errors.SchemaError` with one line na
 from __future__ import annotations
 
 import json
+import math
 from functools import cache
-from typing import Any
-
-import jsonschema
-from jsonschema.exceptions import best_match
+from typing import TYPE_CHECKING, Any
 
 from data_schemas.errors import SchemaError
 from data_schemas.registry import schema_dict, topic
 
+if TYPE_CHECKING:
+    import jsonschema
+
 
 @cache
 def _validator(schema_name: str) -> jsonschema.protocols.Validator:
+    import jsonschema  # ~50 ms: only when something is validated, not for `bslam --help`
+
     schema = schema_dict(schema_name)
     cls = jsonschema.validators.validator_for(schema, default=jsonschema.Draft202012Validator)
     validator: jsonschema.protocols.Validator = cls(schema)
@@ -48,10 +51,87 @@ def validate(schema_name: str, doc: Any, *, what: str | None = None) -> None:
     SchemaError
         One line naming ``what`` and the offending field.
     """
+    from jsonschema.exceptions import best_match
+
     error = best_match(_validator(schema_name).iter_errors(doc))
     if error is not None:
-        label = what or schema_name
-        raise SchemaError(f"{label}: field {_field(error.absolute_path)!r}: {error.message}")
+        field, message = _explain(error)
+        raise SchemaError(f"{what or schema_name}: field {field!r}: {message}")
+    require_finite(doc, what or schema_name)
+
+
+def _explain(error: jsonschema.ValidationError) -> tuple[str, str]:
+    """(field, message) of a validation error.
+
+    For a ``oneOf`` of objects told apart by a ``const`` field (a calibration's ``model``),
+    the best error of the branch the document's ``const`` picks (or the allowed values of
+    that field), rather than whatever branch ``best_match`` happened to descend into.
+    """
+    from jsonschema.exceptions import best_match
+
+    one_of: jsonschema.ValidationError = error
+    while one_of.validator != "oneOf" and one_of.parent is not None:
+        one_of = one_of.parent  # type: ignore[assignment]
+    instance = one_of.instance
+    branches = one_of.validator_value if isinstance(one_of.validator_value, list) else []
+    if one_of.validator != "oneOf" or not isinstance(instance, dict):
+        return _located(error)
+    by_branch: dict[int, list[jsonschema.ValidationError]] = {}
+    for sub in one_of.context or ():
+        by_branch.setdefault(int(sub.schema_path[0]), []).append(sub)
+    consts = [
+        {
+            key: sub["const"]
+            for key, sub in branch.get("properties", {}).items()
+            if isinstance(sub, dict) and "const" in sub
+        }
+        for branch in branches
+    ]
+    matching = [
+        i for i, c in enumerate(consts) if c and all(instance.get(k) == v for k, v in c.items())
+    ]
+    if len(matching) == 1 and by_branch.get(matching[0]):
+        return _located(best_match(by_branch[matching[0]]) or error)
+    keys = {k for c in consts for k in c}
+    if not matching and len(keys) == 1:
+        key = keys.pop()
+        allowed = [c[key] for c in consts if key in c]
+        path = [*one_of.absolute_path, key]
+        return _field(path), f"{instance.get(key)!r} is not one of {allowed}"
+    return _located(error)
+
+
+def _located(error: jsonschema.ValidationError) -> tuple[str, str]:
+    """(field, message); a missing required property is named as the field itself."""
+    required = error.validator_value
+    if (
+        error.validator == "required"
+        and isinstance(error.instance, dict)
+        and isinstance(required, list)
+    ):
+        missing = [k for k in required if k not in error.instance]
+        if missing:
+            return _field([*error.absolute_path, missing[0]]), "is missing"
+    return _field(error.absolute_path), error.message
+
+
+def require_finite(doc: Any, what: str, *, path: str = "") -> None:
+    """Raise SchemaError naming the field if ``doc`` holds NaN or an infinity anywhere.
+
+    JSON has no NaN or infinity, but Python's parser accepts ``NaN`` and ``Infinity`` and JSON
+    Schema's ``number`` lets them through; a document a user wrote must not carry them.
+    """
+    if isinstance(doc, float):
+        if not math.isfinite(doc):
+            raise SchemaError(
+                f"{what}: field {path or '(top level)'!r}: must be a finite number, got {doc}"
+            )
+    elif isinstance(doc, dict):
+        for key, value in doc.items():
+            require_finite(value, what, path=f"{path}.{key}" if path else str(key))
+    elif isinstance(doc, list):
+        for i, value in enumerate(doc):
+            require_finite(value, what, path=f"{path}.{i}" if path else str(i))
 
 
 def validate_message(topic_name: str, msg: dict[str, Any]) -> None:

@@ -130,16 +130,3 @@ def topic(name: str) -> Topic:
         raise UnknownSchemaError(
             f"unknown topic {name!r}; known topics: {', '.join(sorted(TOPICS))}"
         ) from None
-
-
-def register_topic(name: str, schema: str, description: str) -> Topic:
-    """Add a topic (e.g. a derived ``/pipeline/...`` channel); its schema file must exist."""
-    _schema_file(schema)
-    t = Topic(name, schema, description)
-    existing = TOPICS.get(name)
-    if existing is not None and existing.schema != schema:
-        raise UnknownSchemaError(
-            f"topic {name!r} is already registered with schema {existing.schema!r}"
-        )
-    TOPICS[name] = t
-    return t

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from data_schemas.calibration import Calibration, calibration_from_dict
+from data_schemas.catalog import catalog_problem
 from data_schemas.codec import validate
 from data_schemas.colors import appearance_problem, class_label
 from data_schemas.errors import MissingMetadataError, SchemaError
@@ -98,15 +99,11 @@ class Session:
         given = self.doc.get("session_id")
         if isinstance(given, str) and given:
             return given
-        return uuid.uuid5(uuid.NAMESPACE_OID, self.to_json()).hex
+        return uuid.uuid5(uuid.NAMESPACE_OID, json.dumps(self.doc, separators=(",", ":"))).hex
 
     def landmark_names(self) -> list[str]:
         """Catalog names in order."""
         return [lm.name for lm in self.landmarks]
-
-    def to_json(self) -> str:
-        """The document as JSON text (what goes into the metadata record)."""
-        return json.dumps(self.doc, separators=(",", ":"))
 
 
 def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> Session:
@@ -116,15 +113,10 @@ def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> 
         if problem:
             raise SchemaError(f"{what}: field 'landmarks.{i}': {problem}")
     validate("bslam.Session", doc, what=what)
-    names = [lm["name"] for lm in doc["landmarks"]]
-    if len(set(names)) != len(names):
-        raise SchemaError(f"{what}: field 'landmarks': landmark names must be unique, got {names}")
     ref = doc["reference"]
-    for r in ref:
-        if r not in names:
-            raise SchemaError(f"{what}: field 'reference': {r!r} is not in the landmark catalog")
-    if ref[0] == ref[1]:
-        raise SchemaError(f"{what}: field 'reference': the two reference landmarks must differ")
+    wrong = catalog_problem([lm["name"] for lm in doc["landmarks"]], ref)
+    if wrong is not None:
+        raise SchemaError(f"{what}: field {wrong[0]!r}: {wrong[1]}")
     specs = []
     for lm in doc["landmarks"]:
         hsv = lm.get("hsv")

@@ -1,4 +1,4 @@
-"""Batch least squares: 2-D bundle adjustment over all bearings (METHOD.md section 8).
+"""Batch least squares: 2-D bundle adjustment over all bearings (docs/method.md, part 8).
 
 Unknowns: every non-reference landmark's position in FL, and per movement its start point
 ``O1`` (FL), heading and log-length (so ``O2 = O1 + e^l (cos h, sin h)``). Gauge: the reference

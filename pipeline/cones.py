@@ -1,4 +1,4 @@
-"""Vision cones in FR and their intersection ``A_i`` (METHOD.md section 3).
+"""Vision cones in FR and their intersection ``A_i`` (docs/method.md, part 3).
 
 In FR the observation points are ``O1 = (0, 0)`` and ``O2 = (1, 0)``. A bearing ``b`` seen from
 ``O`` with error bound ``eps`` gives the cone ``{O + r (cos a, sin a) : |a - b| <= eps,

@@ -1,4 +1,4 @@
-"""Cramér–Rao bound for bearing-only triangulation (METHOD.md section 8).
+"""Cramér–Rao bound for bearing-only triangulation (docs/method.md, part 8).
 
 Fisher information of a landmark at ``x`` from bearings taken at known points ``o_i`` with
 independent noise of std ``sigma``: ``J = sum n_i n_i^T / (sigma^2 r_i^2)``, ``n_i`` the unit
@@ -9,18 +9,15 @@ actual std (:func:`truncated_gaussian_std`) as a Gaussian-equivalent yardstick.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import NDArray
+
+from data_schemas.angles import truncated_normal_std
 
 
 def truncated_gaussian_std(eps_rad: float, sigma_frac: float = 0.5) -> float:
     """Std (rad) of a Gaussian of std ``sigma_frac * eps`` truncated to ``[-eps, eps]``."""
-    k = 1.0 / sigma_frac
-    mass = math.erf(k / math.sqrt(2.0))
-    pdf_k = math.exp(-0.5 * k * k) / math.sqrt(2.0 * math.pi)
-    return sigma_frac * eps_rad * math.sqrt(1.0 - 2.0 * k * pdf_k / mass)
+    return truncated_normal_std(sigma_frac * eps_rad, eps_rad)
 
 
 def fisher_information(

@@ -1,4 +1,4 @@
-"""Change of frame FR -> FL (METHOD.md section 4).
+"""Change of frame FR -> FL (docs/method.md, part 4).
 
 Each pair ``(s1, s2)`` of reference particles defines the similarity that sends ``s1`` to
 (0, 0) and ``s2`` to (1, 0): with ``d = s2 - s1`` and ``u = z - s1``,

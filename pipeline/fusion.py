@@ -1,4 +1,4 @@
-"""Recursive fusion in FL (METHOD.md section 5), two ways.
+"""Recursive fusion in FL (docs/method.md, part 5), two ways.
 
 :func:`fuse_likelihood` (the default of :class:`pipeline.BearingSlam`):
 ``q_t = q_{t-1} L_t / ∫ q_{t-1} L_t`` with ``L_t`` this movement's bearing likelihood,

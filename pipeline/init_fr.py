@@ -1,4 +1,4 @@
-"""Initialization of one landmark in FR (METHOD.md section 3).
+"""Initialization of one landmark in FR (docs/method.md, part 3).
 
 :func:`initialize_fr` (the paper): uniform draws in ``A_i``, importance weights ``p1 p2`` (the
 chosen prior seen from O1 and O2), one systematic resampling to ``n_r`` equally weighted

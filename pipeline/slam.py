@@ -23,6 +23,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.catalog import catalog_problem
 from data_schemas.errors import EstimationError
 from pipeline.cones import (
     O1_FR,
@@ -168,12 +169,9 @@ class BearingSlam:
         n_frame_pool: int = N_FRAME_POOL,
     ) -> None:
         names = list(landmarks)
-        if len(set(names)) != len(names):
-            raise EstimationError(f"landmark names must be unique, got {names}")
-        if reference[0] == reference[1] or any(r not in names for r in reference):
-            raise EstimationError(
-                f"reference must be two different catalog landmarks, got {reference}"
-            )
+        problem = catalog_problem(names, reference)
+        if problem is not None:
+            raise EstimationError(f"{problem[0]}: {problem[1]}")
         if n_r < 2 or n_l < 2:
             raise EstimationError(f"need n_r >= 2 and n_l >= 2, got n_r={n_r}, n_l={n_l}")
         if frame_change not in ("sampled", "exact"):

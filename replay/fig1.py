@@ -9,10 +9,12 @@ a heat map over the cone (y stretched so the narrow cone is readable) under
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import rerun as rr
+from numpy.typing import NDArray
 
 from pipeline.priors import make_prior, prior_density_grid, range_marginal
 from replay.records import PRIORS
@@ -25,20 +27,58 @@ WIDTH, HEIGHT = 320, 160
 N_ANGLE = 64
 
 
+@dataclass(frozen=True)
+class Fig1:
+    """The paper's Fig. 1 for one bearing: each prior's density on a grid and its p(r).
+
+    Attributes
+    ----------
+    xs, ys : ndarray (nx,), (ny,)
+        Grid of the densities, FR units (the bearing along +x from the origin).
+    densities : dict of str to ndarray (ny, nx)
+        Density of each prior (:data:`~replay.records.PRIORS`) at ``(xs[j], ys[i])``.
+    r : ndarray (k,)
+        Ranges of the marginals (bin centres: the support's ends would halve p(r)).
+    marginals : dict of str to ndarray (k,)
+        Range marginal p(r) of each prior.
+    """
+
+    xs: NDArray[np.float64]
+    ys: NDArray[np.float64]
+    densities: dict[str, NDArray[np.float64]]
+    r: NDArray[np.float64]
+    marginals: dict[str, NDArray[np.float64]]
+
+
+def fig1_data(
+    eps_rad: float, *, nx: int = WIDTH, ny: int = HEIGHT, nr: int = 60, bearing_rad: float = 0.0
+) -> Fig1:
+    """Compute Fig. 1 (every prior, the cone of ``eps_rad`` around ``bearing_rad``); ``ys``
+    runs from +y to -y, as image rows do."""
+    half = R_MAX * math.tan(1.6 * eps_rad)
+    xs = np.linspace(0.0, R_MAX, nx)
+    ys = np.linspace(half, -half, ny)
+    edges = np.linspace(R_MIN, R_MAX, nr + 1)
+    r = 0.5 * (edges[1:] + edges[:-1])
+    densities: dict[str, NDArray[np.float64]] = {}
+    marginals: dict[str, NDArray[np.float64]] = {}
+    for name in PRIORS:
+        densities[name] = prior_density_grid(name, bearing_rad, eps_rad, R_MIN, R_MAX, xs, ys)
+        prior = make_prior(name, eps_rad, R_MIN, R_MAX)
+        marginals[name] = range_marginal(prior, r, bearing_rad, n_angle=N_ANGLE)
+    return Fig1(xs, ys, densities, r, marginals)
+
+
 def log_fig1(rec: rr.RecordingStream, eps_rad: float, *, bearing_rad: float = 0.0) -> None:
     """Log the three priors' densities and range marginals for one bearing (static)."""
-    half = R_MAX * math.tan(1.6 * eps_rad)
-    xs = np.linspace(0.0, R_MAX, WIDTH)
-    ys = np.linspace(half, -half, HEIGHT)  # image row 0 is the top: +y
-    edges = np.linspace(R_MIN, R_MAX, 61)
-    r = 0.5 * (edges[1:] + edges[:-1])  # bin centres (the support's ends would halve p(r))
+    fig = fig1_data(eps_rad, bearing_rad=bearing_rad)
+    r = fig.r
     for name in PRIORS:
-        density = prior_density_grid(name, bearing_rad, eps_rad, R_MIN, R_MAX, xs, ys)
+        density = fig.densities[name]
         scaled = np.sqrt(density / max(float(density.max()), 1e-300))
         heat = cv2.applyColorMap((255 * scaled).astype(np.uint8), cv2.COLORMAP_VIRIDIS)
         rec.log(f"fig1/density/{name}", rr.Image(heat, color_model="BGR"), static=True)
-        prior = make_prior(name, eps_rad, R_MIN, R_MAX)
-        marginal = range_marginal(prior, r, bearing_rad, n_angle=N_ANGLE)
+        marginal = fig.marginals[name]
         rec.log(
             f"fig1/range/{name}",
             rr.BarChart(marginal, abscissa=r, widths=np.full(r.size, r[1] - r[0])),

@@ -11,6 +11,7 @@ the call is already loaded.
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -115,6 +116,10 @@ def run_tasks(
     SchedulerError
         ``scheduler`` cannot be reached.
     """
+    if scheduler is not None:
+        from replay.extras import require
+
+        require("distributed", extra="experiments", feature="a Dask scheduler (--scheduler)")
     guarded = partial(_guarded, fn)
     outcomes: list[Outcome[T]] = []
     bar = tqdm(total=len(tasks), desc=desc, unit=unit, file=sys.stderr, disable=not progress)
@@ -132,13 +137,37 @@ def run_tasks(
             for i, task in enumerate(tasks):
                 done(guarded(i, task))
         else:
-            with ProcessPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
+            pool = ProcessPoolExecutor(
+                max_workers=min(workers, len(tasks)), initializer=_ignore_sigint
+            )
+            try:
                 futures: dict[Future[Outcome[T]], int] = {
                     pool.submit(guarded, i, task): i for i, task in enumerate(tasks)
                 }
                 for fut in as_completed(futures):
                     done(_collect(fut.result, futures[fut]))
+            except BaseException:  # Ctrl-C, SIGTERM (as SystemExit), a bug: no orphan workers
+                _kill_workers(pool)
+                raise
+            pool.shutdown()
     return sorted(outcomes, key=lambda o: o.index)
+
+
+def _ignore_sigint() -> None:
+    """Pool worker initializer: Ctrl-C reaches the whole process group; the parent handles it
+    (and then kills the workers), so a worker does not print a traceback of its own."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _kill_workers(pool: ProcessPoolExecutor) -> None:
+    """Stop a pool at once: cancel queued tasks and kill its worker processes."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    for process in processes:
+        process.kill()
+    for process in processes:
+        process.join(timeout=1.0)
+    # the pool sees its workers gone (as after a crash) and fails what was left; wait for that
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _run_dask(

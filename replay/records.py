@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol, cast
+from typing import Any, Protocol, cast, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,7 +21,8 @@ from pipeline.estimators import DEFAULT_ESTIMATOR, ESTIMATORS
 from pipeline.priors import PriorName
 from replay.truth import Truth
 
-PRIORS: tuple[PriorName, ...] = ("impartial", "gaussian", "mixture")
+#: the prior names, in the order of ``pipeline.priors.PriorName``
+PRIORS: tuple[PriorName, ...] = get_args(PriorName)
 
 
 @dataclass(frozen=True)

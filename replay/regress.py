@@ -14,12 +14,14 @@ a log without any gets ``NAME.expected.json`` from the default estimator).
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator, Mapping
+import math
+import shlex
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
-from data_schemas.errors import LogError
+from data_schemas.errors import BslamError, LogError
 from pipeline.estimators import DEFAULT_ESTIMATOR, ESTIMATORS
 from replay.records import MethodConfig
 
@@ -33,6 +35,14 @@ EXPECTED_SUFFIX = ".expected.json"
 
 class NoCasesError(LogError):
     """A regression folder holds no ``NAME.mcap`` + ``NAME.expected.json`` pair."""
+
+
+class ExpectedFileError(LogError):
+    """An expected summary is not a summary ``bslam process`` writes (names the file and key)."""
+
+
+class ToleranceError(BslamError):
+    """A regression tolerance is negative or not a finite number."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +100,7 @@ def find_cases(folder: Path, *, update: bool = False, estimator: str | None = No
 
 
 def method_of(expected: Mapping[str, Any]) -> MethodConfig:
-    """The settings an expected summary was produced with."""
+    """The settings an expected summary was produced with (raise BslamError if impossible)."""
     m = expected["method"]
     return MethodConfig(
         prior=m["prior"],
@@ -103,12 +113,75 @@ def method_of(expected: Mapping[str, Any]) -> MethodConfig:
 
 
 def load_expected(case: Case) -> dict[str, Any]:
-    """Read a case's expected summary."""
+    """Read a case's expected summary and check the parts the comparison uses.
+
+    Raises
+    ------
+    ExpectedFileError
+        One line naming the file and the first key that is missing or malformed.
+    """
     try:
-        doc: dict[str, Any] = json.loads(case.expected.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise LogError(f"{case.expected}: cannot read the expected summary ({exc})") from None
-    return doc
+        doc = json.loads(case.expected.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ExpectedFileError(
+            f"{case.expected}: cannot read the expected summary ({exc})"
+        ) from None
+    problem = _expected_problem(doc)
+    if problem is not None:
+        raise ExpectedFileError(
+            f"{case.expected}: {problem}; it is not a summary written by bslam; restore it "
+            f"(git checkout) or rewrite it with "
+            f"{shlex.join(['bslam', 'regress', str(case.log.parent), '--update'])}"
+        )
+    result: dict[str, Any] = doc
+    return result
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _landmarks_problem(where: str, landmarks: Any) -> str | None:
+    if not isinstance(landmarks, dict):
+        return f"key {where!r} is not an object"
+    for name, est in landmarks.items():
+        key = f"{where}.{name}"
+        if not isinstance(est, dict):
+            return f"key {key!r} is not an object"
+        mean, cov = est.get("mean"), est.get("cov")
+        if not (isinstance(mean, list) and len(mean) == 2 and all(map(_is_number, mean))):
+            return f"key {key}.mean is not two finite numbers"
+        if not (
+            isinstance(cov, list)
+            and len(cov) == 2
+            and all(isinstance(r, list) and len(r) == 2 and all(map(_is_number, r)) for r in cov)
+        ):
+            return f"key {key}.cov is not a 2 x 2 matrix of finite numbers"
+    return None
+
+
+def _expected_problem(doc: Any) -> str | None:
+    """What is wrong with an expected summary, or None."""
+    if not isinstance(doc, dict):
+        return "not a JSON object"
+    method = doc.get("method")
+    if not isinstance(method, dict):
+        return "key 'method' is missing or not an object"
+    for key in ("prior", "n_r", "n_l", "seed"):
+        if key not in method:
+            return f"key 'method.{key}' is missing"
+    movements = doc.get("movements")
+    if not isinstance(movements, list):
+        return "key 'movements' is missing or not a list"
+    for i, m in enumerate(movements):
+        if not (isinstance(m, dict) and isinstance(m.get("index"), int)):
+            return f"key 'movements[{i}].index' is missing or not an integer"
+        if not isinstance(m.get("status"), str):
+            return f"key 'movements[{i}].status' is missing or not text"
+        problem = _landmarks_problem(f"movements[{i}].landmarks", m.get("landmarks"))
+        if problem is not None:
+            return problem
+    return _landmarks_problem("landmarks", doc.get("landmarks"))
 
 
 def _fmt(v: Any) -> str:
@@ -131,7 +204,7 @@ def _compare_landmarks(
             continue
         e, a = expected[name], actual[name]
         moved = max(abs(x - y) for x, y in zip(e["mean"], a["mean"], strict=True))
-        if moved > mean_tol:
+        if not moved <= mean_tol:  # NaN is a move too
             yield (
                 f"{where} {name}: mean moved by {moved:.3g} (> {mean_tol:g}): "
                 f"expected {_fmt(e['mean'])}, got {_fmt(a['mean'])}"
@@ -140,7 +213,7 @@ def _compare_landmarks(
         a_cov = [x for row in a["cov"] for x in row]
         scale = max(abs(x) for x in e_cov) or 1.0
         changed = max(abs(x - y) for x, y in zip(e_cov, a_cov, strict=True)) / scale
-        if changed > cov_rtol:
+        if not changed <= cov_rtol:
             yield (
                 f"{where} {name}: covariance changed by {changed:.1%} (> {cov_rtol:.0%}): "
                 f"expected {_fmt(e['cov'])}, got {_fmt(a['cov'])}"
@@ -178,3 +251,78 @@ def compare(
         _compare_landmarks("final", expected["landmarks"], actual["landmarks"], mean_tol, cov_rtol)
     )
     return diffs
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """What regression found for one case.
+
+    Attributes
+    ----------
+    case : Case
+    status : {"ok", "regression", "written"}
+        ``written``: the expected file was (re)written by ``update``.
+    diffs : list of str
+        Readable differences (empty unless ``status == "regression"``).
+    """
+
+    case: Case
+    status: Literal["ok", "regression", "written"]
+    diffs: list[str]
+
+
+def run_regression(
+    folder: Path,
+    *,
+    update: bool = False,
+    estimator: str | None = None,
+    mean_tol: float = MEAN_TOL,
+    cov_rtol: float = COV_RTOL,
+    on_case: Callable[[CaseResult], None] | None = None,
+) -> list[CaseResult]:
+    """Reprocess every case in ``folder`` and compare it with (or, if ``update``, rewrite) its
+    expected summary.
+
+    Parameters
+    ----------
+    folder : Path
+        Folder of ``NAME.mcap`` logs with their expected summaries (see :func:`find_cases`).
+    update : bool
+        Rewrite every expected file from the current code (each with its own settings) instead
+        of comparing.
+    estimator : str, optional
+        Only the expected summaries this estimator made (see :func:`find_cases`).
+    mean_tol, cov_rtol : float
+        Tolerances of :func:`compare` (finite, >= 0).
+    on_case : callable, optional
+        Called with each result as soon as its case is done (progress output).
+
+    Raises
+    ------
+    NoCasesError, ExpectedFileError, ToleranceError
+        One line each. Every expected file is read and checked before any log is processed.
+    """
+    from replay.process import process_log, write_json
+
+    for name, tol in (("mean tolerance", mean_tol), ("covariance tolerance", cov_rtol)):
+        if not (math.isfinite(tol) and tol >= 0):
+            raise ToleranceError(f"{name} must be a finite number >= 0, got {tol}")
+    todo = find_cases(folder, update=update, estimator=estimator)
+    expected = {
+        case.expected: load_expected(case) if case.expected.is_file() else None for case in todo
+    }
+    results = []
+    for case in todo:
+        doc = expected[case.expected]
+        method = MethodConfig(estimator=case.estimator) if doc is None else method_of(doc)
+        actual = process_log(case.log, method)
+        if update or doc is None:
+            write_json(case.expected, actual)
+            result = CaseResult(case, "written", [])
+        else:
+            diffs = compare(doc, actual, mean_tol=mean_tol, cov_rtol=cov_rtol)
+            result = CaseResult(case, "regression" if diffs else "ok", diffs)
+        if on_case is not None:
+            on_case(result)
+        results.append(result)
+    return results

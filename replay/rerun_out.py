@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import os
+import socket
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
+from urllib.parse import urlsplit
 
 import rerun as rr
 
@@ -41,6 +44,10 @@ def open_recording(
 
     ``live``: the blueprint follows the latest movement (a log being followed).
     """
+    if target.kind == "spawn":
+        _check_display()
+    elif target.kind == "connect":
+        _check_reachable(target.where or DEFAULT_CONNECT_URL)
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=name)
     blueprint = method_blueprint(fig1_priors=PRIORS, live=live)
     url = None
@@ -55,13 +62,44 @@ def open_recording(
         else:
             url = rec.serve_grpc(default_blueprint=blueprint)
     except (RuntimeError, OSError) as exc:
-        raise ViewerError(f"cannot open the Rerun {target.kind} target ({exc})") from None
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ViewerError(f"cannot open the Rerun {target.kind} target: {reason}") from None
     return rec, url
 
 
 def recording_id(log: MessageLog) -> str:
     """The Rerun recording id of a log: its session id, so two logs never merge in a viewer."""
     return log.session.session_id
+
+
+#: Where ``connect_grpc`` streams when given no URL (the viewer's default).
+DEFAULT_CONNECT_URL = "rerun+http://127.0.0.1:9876/proxy"
+
+
+def _check_display() -> None:
+    """A spawned viewer needs a display; without one it dies and nothing is shown."""
+    if sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    ):
+        raise ViewerError(
+            "--spawn needs a display (neither DISPLAY nor WAYLAND_DISPLAY is set); "
+            "use --save FILE.rrd and open it where there is one, or --serve"
+        )
+
+
+def _check_reachable(url: str, timeout_s: float = 2.0) -> None:
+    """Rerun connects in the background and only logs a failure: try the address first."""
+    parsed = urlsplit(url.removeprefix("rerun+"))
+    host, port = parsed.hostname, parsed.port
+    if host is None or port is None:
+        raise ViewerError(f"--connect {url}: expected a URL like {DEFAULT_CONNECT_URL}")
+    try:
+        socket.create_connection((host, port), timeout=timeout_s).close()
+    except OSError as exc:
+        raise ViewerError(
+            f"no Rerun viewer at {url} ({exc.strerror or exc}); start one with `rerun`, "
+            "or use --save FILE.rrd"
+        ) from None
 
 
 def replay_log(

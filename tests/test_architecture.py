@@ -1,8 +1,9 @@
-"""The import rule of DESIGN.md, beyond what ruff's banned-api can see."""
+"""The import rule of docs/design.md, beyond what ruff's banned-api can see."""
 
 from __future__ import annotations
 
 import ast
+import os
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,3 +30,40 @@ def test_package_rules_are_configured() -> None:
     for package in packages:
         text = (ROOT / package / "ruff.toml").read_text(encoding="utf-8")
         assert "banned" in text, package
+
+
+def _project_text_files() -> list[Path]:
+    suffixes = {".py", ".md", ".toml", ".json", ".cfg", ".txt"}
+    skip = {".venv", ".git", ".mypy_cache", ".hypothesis", ".benchmarks", "build", "__pycache__"}
+    found = []
+    for folder, dirs, files in os.walk(ROOT):
+        dirs[:] = [d for d in dirs if d not in skip and not d.endswith(".egg-info")]
+        found += [Path(folder) / f for f in files if Path(f).suffix in suffixes]
+    return sorted(found)
+
+
+def test_design_and_method_are_cited_inside_the_repository() -> None:
+    # the design and the method live in docs/; nothing may send a reader outside the repository
+    outside = ("DESIGN" + ".md", "METHOD" + ".md")  # spelled apart so this file is no hit
+    hits = [
+        f"{p.relative_to(ROOT)}: {name}"
+        for p in _project_text_files()
+        for name in outside
+        if name in p.read_text(encoding="utf-8", errors="replace")
+    ]
+    assert hits == []
+    for doc in ("docs/design.md", "docs/method.md"):
+        assert (ROOT / doc).is_file()
+
+
+def test_markdown_links_to_repository_files_exist() -> None:
+    import re
+
+    broken = []
+    for p in _project_text_files():
+        if p.suffix != ".md":
+            continue
+        for target in re.findall(r"\]\(([^)#\s]+)", p.read_text(encoding="utf-8")):
+            if "://" not in target and not (p.parent / target).exists():
+                broken.append(f"{p.relative_to(ROOT)} -> {target}")
+    assert broken == []

@@ -23,6 +23,7 @@ from data_schemas.errors import CorruptLogError, MissingMetadataError, Unfinishe
 from data_schemas.mcap.scan import Damage, LogScan
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
+from data_schemas.shape import check_shape
 
 Source = str | os.PathLike[str] | IO[bytes]
 
@@ -54,8 +55,16 @@ class LogMessage:
     data: bytes = field(repr=False)
 
     def decode(self) -> dict[str, Any]:
-        """The message as a dict (JSON decoded, not validated)."""
-        return decode(self.topic, self.data)
+        """The message as a dict: JSON decoded, required fields and their types checked.
+
+        Raises
+        ------
+        SchemaError
+            One line naming the topic, the log time and the field.
+        """
+        msg = decode(self.topic, self.data)
+        check_shape(self.schema, msg, topic=self.topic, log_time_ns=self.log_time_ns)
+        return msg
 
 
 def corruption(damage: list[Damage]) -> list[Damage]:

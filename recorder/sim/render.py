@@ -24,11 +24,11 @@ straddles the panorama seam wraps around.
 
 Noise: each bearing gets Gaussian noise (std ``bearing_noise_rad``) truncated at the vision error
 bound ``vision_error_rad`` (|noise| <= eps always; the std after truncation is
-:func:`truncated_normal_std`). Frames then get lighting variation (a random global gain and a
-smooth gradient toward a fixed world direction) and pixel noise (mostly luminance, a quarter of
-it per channel) drawn at a random offset from a Gaussian table precomputed per image size (so it
-costs one add; it is independent within a frame, not between frames). The background (floor,
-walls, room) stays unsaturated grey-brown so it never looks like a landmark colour.
+:func:`data_schemas.angles.truncated_normal_std`). Frames then get lighting variation (a random
+global gain and a smooth gradient toward a fixed world direction) and pixel noise (mostly luminance,
+a quarter of it per channel) drawn at a random offset from a Gaussian table precomputed per image
+size (so it costs one add; it is independent within a frame, not between frames). The background
+(floor, walls, room) stays unsaturated grey-brown so it never looks like a landmark colour.
 
 Speed: tables (background, pixel bearings, noise) are cached per calibration; a 255x176 frame
 renders in a few hundred microseconds.
@@ -36,8 +36,7 @@ renders in a few hundred microseconds.
 Public API
 ----------
 :func:`render_panorama` -> :class:`RenderedFrame` (``image_bgr`` and ``truth``, one
-:class:`LandmarkTruth` per landmark), :class:`Lighting`, :func:`truncated_normal`,
-:func:`truncated_normal_std`.
+:class:`LandmarkTruth` per landmark), :class:`Lighting`, :func:`truncated_normal`.
 """
 
 from __future__ import annotations
@@ -156,16 +155,6 @@ def truncated_normal(
         out[bad] = rng.normal(0.0, std, int(bad.sum()))
         bad = np.abs(out) > bound
     return out
-
-
-def truncated_normal_std(std: float, bound: float) -> float:
-    """Standard deviation of N(0, std^2) truncated to ``[-bound, bound]``."""
-    if std <= 0:
-        return 0.0
-    k = bound / std
-    pdf = math.exp(-0.5 * k * k) / math.sqrt(TWO_PI)
-    mass = math.erf(k / math.sqrt(2.0))
-    return std * math.sqrt(1.0 - 2.0 * k * pdf / mass)
 
 
 def render_panorama(

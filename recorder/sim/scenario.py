@@ -48,9 +48,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 from data_schemas.calibration import Calibration, UnwrappedCalibration, default_omni
+from data_schemas.catalog import catalog_problem
 from data_schemas.codec import validate
 from data_schemas.colors import appearance_problem
 from data_schemas.errors import ScenarioError, SchemaError
+from data_schemas.registry import schema_dict
 from data_schemas.session import LandmarkSpec, shared_reference_problem
 from recorder.moves import Move
 from recorder.sim.world import Arena, Landmark, Pose, SimWorld
@@ -65,25 +67,26 @@ CLEARANCE_M = 0.04
 
 BUILTIN_SCENARIOS: tuple[str, ...] = ("paper", "paper_omni", "coded_3x2")
 
-# Allowed keys per object (the schema's properties; checked first for "did you mean" hints).
-_KEYS: dict[str, tuple[str, ...]] = {
-    "": (
-        "description",
-        "arena",
-        "landmarks",
-        "reference",
-        "camera",
-        "vision_error_deg",
-        "trajectory",
-        "robot",
-    ),
-    "arena": ("width", "height"),
-    "landmarks[]": ("name", "x", "y", "color", "bands", "radius", "height"),
-    "camera": ("model", "width", "height", "bearing_noise_deg", "pixel_noise", "lighting"),
-    "trajectory": ("start", "moves", "distance", "seed"),
-    "trajectory.moves[]": ("turn_deg", "distance"),
-    "robot": ("radius",),
-}
+
+def _allowed_keys() -> dict[str, tuple[str, ...]]:
+    """Allowed keys per object, read from the ``bslam.Scenario`` schema (checked before the
+    schema itself, to give "did you mean" hints): "" is the top level, "landmarks[]" an item."""
+    schema = schema_dict("bslam.Scenario")
+    props = schema["properties"]
+    moves = next(b for b in props["trajectory"]["properties"]["moves"]["oneOf"] if "items" in b)
+    objects = {
+        "": schema,
+        "arena": props["arena"],
+        "landmarks[]": props["landmarks"]["items"],
+        "camera": props["camera"],
+        "trajectory": props["trajectory"],
+        "trajectory.moves[]": moves["items"],
+        "robot": props["robot"],
+    }
+    return {name: tuple(obj["properties"]) for name, obj in objects.items()}
+
+
+_KEYS = _allowed_keys()
 
 
 @dataclass(frozen=True)
@@ -280,13 +283,13 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
         return ScenarioError(f"{what}: key {key!r}: {message}")
 
     arena = Arena(float(doc["arena"]["width"]), float(doc["arena"]["height"]))
-    landmarks = []
-    seen: set[str] = set()
+    ref = doc["reference"]
+    problem = catalog_problem([d["name"] for d in doc["landmarks"]], ref)
+    if problem is not None:
+        raise fail(*problem)
+    landmarks: list[Landmark] = []
     for i, d in enumerate(doc["landmarks"]):
         key = f"landmarks[{i}]"
-        if d["name"] in seen:
-            raise fail(f"{key}.name", f"duplicate landmark name {d['name']!r}")
-        seen.add(d["name"])
         lm = Landmark(
             d["name"],
             float(d["x"]),
@@ -304,14 +307,15 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
                 f"landmark {lm.name} at ({lm.x:g}, {lm.y:g}) m is outside the "
                 f"{arena.width_m:g} x {arena.height_m:g} m arena",
             )
+        for other in landmarks:
+            if math.hypot(lm.x - other.x, lm.y - other.y) < lm.radius_m + other.radius_m:
+                raise fail(
+                    key,
+                    f"landmark {lm.name} at ({lm.x:g}, {lm.y:g}) m overlaps landmark "
+                    f"{other.name} at ({other.x:g}, {other.y:g}) m; move one of them apart",
+                )
         landmarks.append(lm)
 
-    ref = doc["reference"]
-    for r in ref:
-        if r not in seen:
-            raise fail("reference", f"{r!r} is not a landmark name (have {sorted(seen)})")
-    if ref[0] == ref[1]:
-        raise fail("reference", f"the two reference landmarks must differ, got {ref}")
     shared = shared_reference_problem(
         [LandmarkSpec(lm.name, lm.color, bands=lm.bands) for lm in landmarks], ref
     )

@@ -5,7 +5,7 @@ serves a :class:`~recorder.sim.fake_khepera.FakeKhepera` on a pseudo-terminal (r
 through :class:`~recorder.robot.KheperaRobot`), renders frames with
 :class:`~recorder.sim.camera.SimCamera` from the robot's true pose, plans moves with
 :class:`~recorder.sim.planner.MovePlanner`, and records with
-:func:`recorder.record.record_to_file` in virtual time: the same code path as ``bslam record``.
+:func:`recorder.start.run_session` in virtual time: the same code path as ``bslam record``.
 """
 
 from __future__ import annotations
@@ -18,20 +18,13 @@ import numpy as np
 
 from data_schemas.session import LandmarkSpec
 from recorder.clock import PacedClock, VirtualClock
-from recorder.record import (
-    CommandSink,
-    Progress,
-    RecordResult,
-    RecordSettings,
-    Rig,
-    record_to_file,
-)
-from recorder.robot import KheperaRobot, RobotConfig
-from recorder.session import build_session_doc
+from recorder.record import Progress, RecordResult, RecordSettings
+from recorder.robot import RobotConfig
 from recorder.sim.camera import SimCamera
 from recorder.sim.fake_khepera import ActuationNoise, FakeKhepera
 from recorder.sim.planner import MovePlanner
 from recorder.sim.scenario import Scenario
+from recorder.start import SessionFacts, run_session
 from recorder.timebase import EpochClock
 
 
@@ -100,32 +93,32 @@ def simulate_to_file(
     )
     camera = SimCamera.from_scenario(scenario, fake.pose_world, rng_camera)
     planner = MovePlanner(scenario, fake.pose_world, rng_plan)
-    sink = CommandSink()
+    facts = SessionFacts(
+        camera_source=f"simulated ({source})",
+        calibration=scenario.calibration(),
+        landmarks=[LandmarkSpec(lm.name, lm.color, bands=lm.bands) for lm in scenario.landmarks],
+        reference=scenario.reference,
+        vision_error_rad=scenario.vision_error_rad,
+        scenario=scenario.to_dict(),
+        extra={
+            "recorder": {"png_level": s.record.png_level},
+            "simulation": {
+                "seed": scenario.trajectory.seed,
+                "turn_noise": s.turn_noise,
+                "distance_noise": s.distance_noise,
+            },
+        },
+    )
     with fake.serve_pty() as server:
         config = RobotConfig(port=server.path, model="khepera2 (simulated)")
-        with KheperaRobot.open(config, clock, on_exchange=sink) as robot:
-            robot.version()
-            doc = build_session_doc(
-                created_unix_ns=clock.start_wall_ns,
-                robot=config.session_dict(),
-                camera_source=f"simulated ({source})",
-                calibration=scenario.calibration(),
-                frame_rate_hz=s.record.frame_rate_hz,
-                encoding=s.record.encoding,
-                landmarks=[
-                    LandmarkSpec(lm.name, lm.color, bands=lm.bands) for lm in scenario.landmarks
-                ],
-                reference=scenario.reference,
-                vision_error_rad=scenario.vision_error_rad,
-                scenario=scenario.to_dict(),
-                extra={
-                    "recorder": {"png_level": s.record.png_level},
-                    "simulation": {
-                        "seed": scenario.trajectory.seed,
-                        "turn_noise": s.turn_noise,
-                        "distance_noise": s.distance_noise,
-                    },
-                },
-            )
-            rig = Rig(robot, sink, camera, clock, ground_truth=fake.pose_world)
-            return record_to_file(out, doc, rig, planner, s.record, progress=progress)
+        return run_session(
+            out,
+            config,
+            camera,
+            clock,
+            facts,
+            planner,
+            s.record,
+            ground_truth=fake.pose_world,
+            progress=progress,
+        )

@@ -3,12 +3,21 @@
 Each command lives in its own module and is imported only when it runs (or when ``--help``
 lists it), so ``bslam --help`` stays fast and ``bslam record`` on a robot never imports scipy or
 Rerun. Commands only compose library calls. Any :class:`~data_schemas.errors.BslamError` becomes
-one line on stderr and exit code 1; usage errors exit 2 (click's convention).
+one line on stderr and exit code 1; a usage error is one line and a hint to ``--help``, exit 2
+(click's convention). Ctrl-C exits 130; SIGTERM stops the command the same way (exit 143):
+open files are closed, worker processes are stopped, a log being recorded is finished.
 """
 
 from __future__ import annotations
 
+import atexit
 import importlib
+import os
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+from types import FrameType
 from typing import Any
 
 import click
@@ -49,6 +58,49 @@ class BslamGroup(click.Group):
         except BslamError as exc:
             raise click.ClickException(str(exc)) from None
 
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        **extra: Any,
+    ) -> Any:
+        """Run the command; in standalone mode map every way of stopping to an exit code."""
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, False, **extra)
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGTERM, _exit_on_sigterm) if main_thread else None
+        try:
+            code = super().main(args, prog_name, complete_var, False, **extra)
+        except click.UsageError as exc:  # one line and a hint, not the whole usage text
+            click.echo(f"Error: {exc.format_message()}", err=True)
+            if exc.ctx is not None:
+                click.echo(f"Try '{exc.ctx.command_path} --help'.", err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            exc.show()
+            sys.exit(exc.exit_code)
+        except click.Abort:  # click's form of Ctrl-C (KeyboardInterrupt)
+            click.echo("interrupted", err=True)
+            sys.exit(128 + signal.SIGINT)
+        except BaseException as exc:
+            signum = getattr(exc, "signum", None)  # recorder.record.RecordingInterrupted
+            if not isinstance(signum, int):
+                raise
+            click.echo(str(exc), err=True)
+            sys.exit(128 + signum)
+        finally:
+            if main_thread:
+                signal.signal(signal.SIGTERM, previous)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+def _exit_on_sigterm(signum: int, frame: FrameType | None) -> None:
+    """SIGTERM unwinds like Ctrl-C (files closed, workers stopped), then exits 143."""
+    click.echo("terminated", err=True)
+    raise SystemExit(128 + signum)
+
 
 @click.group(cls=BslamGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="bearing-slam", prog_name="bslam")
@@ -61,5 +113,18 @@ def cli() -> None:
 
 
 def main() -> None:
-    """Console-script entry point."""
-    cli(prog_name="bslam")
+    """Console-script entry point.
+
+    After a stop signal the command has already unwound (logs finished, files closed, workers
+    killed); the interpreter's teardown of scipy, matplotlib and Rerun would take about a second
+    more, so the process leaves at once after the exit handlers.
+    """
+    try:
+        cli(prog_name="bslam")
+    except SystemExit as exc:
+        if exc.code in (128 + signal.SIGINT, 128 + signal.SIGTERM):
+            atexit._run_exitfuncs()
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(int(exc.code))
+        raise

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 
 import click
 
+from replay.cli.options import SEED
 from replay.cli.process import estimator_option
 
 
@@ -20,7 +22,7 @@ from replay.cli.process import estimator_option
 )
 @click.option(
     "--seed",
-    type=int,
+    type=SEED,
     default=7,
     show_default=True,
     help="Seed of the simulated trajectory and of the estimator.",
@@ -86,4 +88,4 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool, estimator: str) -> N
     click.echo(f"  derived log    {derived}")
     click.echo(f"  summary        {summary}")
     click.echo(f"  Rerun          {rrd}")
-    click.echo(f"open the replay with:  {viewer_command()} {rrd}")
+    click.echo(f"open the replay with:  {shlex.join([viewer_command(), str(rrd)])}")

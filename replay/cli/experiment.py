@@ -11,6 +11,16 @@ from typing import Any
 import click
 
 from data_schemas.errors import BslamError
+from replay.cli.options import SEED
+from replay.cli.process import MAX_N_L, MAX_N_R
+from replay.experiments.protocol import (
+    ALL_SWEEP_PARAMS,
+    FRAME_CHANGES,
+    PAPER_N_L_VALUES,
+    PRIORS,
+    ProtocolError,
+    check_sweep_values,
+)
 
 DEFAULT_WORKERS = os.cpu_count() or 1
 
@@ -19,27 +29,42 @@ class ExperimentArgumentError(BslamError):
     """A command-line value of ``bslam experiment`` cannot be used."""
 
 
-def _int_list(text: str, option: str) -> tuple[int, ...]:
+class NoRunSucceededError(BslamError):
+    """Every run of an experiment failed."""
+
+
+def _int_list(ctx: click.Context, param: click.Parameter, text: str) -> tuple[int, ...]:
+    """``--n-l-values``: comma-separated particle counts of at least 2 (empty: none)."""
     try:
         values = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
-        raise ExperimentArgumentError(
-            f"{option}: expected comma-separated integers like 50,300,1000, got {text!r}"
+        raise click.BadParameter(
+            f"expected comma-separated integers like 50,300,1000, got {text!r}"
         ) from None
+    if any(v < 2 for v in values):
+        raise click.BadParameter(f"particle counts must be at least 2, got {text!r}")
     return values
 
 
+def _priors(ctx: click.Context, param: click.Parameter, text: str) -> tuple[str, ...]:
+    """``--priors``: a comma-separated, non-empty subset of the prior names."""
+    priors = tuple(p.strip() for p in text.split(",") if p.strip())
+    unknown = [p for p in priors if p not in PRIORS]
+    if unknown or not priors:
+        raise click.BadParameter(
+            f"expected a comma-separated list of {', '.join(PRIORS)}, got {text!r}"
+        )
+    return priors
+
+
 def _out_dir(out: Path, force: bool) -> Path:
+    """``--out``, checked; the experiment makes it once every input has been validated."""
     if out.exists() and not out.is_dir():
         raise ExperimentArgumentError(f"--out {out}: is a file; give a folder for the outputs")
     if out.is_dir() and any(out.iterdir()) and not force:
         raise ExperimentArgumentError(
             f"--out {out}: the folder holds earlier results; pass --force to replace them"
         )
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ExperimentArgumentError(f"--out {out}: cannot create it ({exc.strerror})") from None
     return out
 
 
@@ -51,10 +76,12 @@ def _common(fn: Any) -> Any:
             required=True,
             help="Folder for logs, results, figures, .rrd and report.",
         ),
-        click.option("--runs", type=int, default=None, help="Simulated trajectories."),
+        click.option(
+            "--runs", type=click.IntRange(min=1), default=None, help="Simulated trajectories."
+        ),
         click.option(
             "--movements",
-            type=int,
+            type=click.IntRange(min=1),
             default=10,
             show_default=True,
             help="Straight movements per trajectory.",
@@ -62,7 +89,7 @@ def _common(fn: Any) -> Any:
         click.option(
             "--n-r",
             "n_r",
-            type=int,
+            type=click.IntRange(2, MAX_N_R),
             default=50,
             show_default=True,
             help="Particles per landmark in FR.",
@@ -70,19 +97,21 @@ def _common(fn: Any) -> Any:
         click.option(
             "--n-l",
             "n_l",
-            type=int,
+            type=click.IntRange(2, MAX_N_L),
             default=300,
             show_default=True,
             help="Particles per landmark in FL.",
         ),
         click.option(
             "--priors",
-            default="impartial,gaussian,mixture",
+            default=",".join(PRIORS),
             show_default=True,
+            callback=_priors,
             help="Single-view priors to compare.",
         ),
         click.option(
             "--frame-change",
+            type=click.Choice(FRAME_CHANGES),
             default="sampled",
             show_default=True,
             help="sampled (O(n_l) random triples) or exact (all n_r^3 triples).",
@@ -95,7 +124,7 @@ def _common(fn: Any) -> Any:
         ),
         click.option(
             "--workers",
-            type=int,
+            type=click.IntRange(min=1),
             default=DEFAULT_WORKERS,
             show_default=True,
             help="Local worker processes.",
@@ -106,7 +135,7 @@ def _common(fn: Any) -> Any:
             help="Dask scheduler address (tcp://host:8786) instead of local workers.",
         ),
         click.option(
-            "--seed", type=int, default=0, show_default=True, help="Run i uses seed SEED + i."
+            "--seed", type=SEED, default=0, show_default=True, help="Run i uses seed SEED + i."
         ),
         click.option("--quiet", is_flag=True, help="No progress bar."),
         click.option("--force", is_flag=True, help="Replace earlier results in --out."),
@@ -119,18 +148,24 @@ def _common(fn: Any) -> Any:
 def _protocol(kw: dict[str, Any], runs: int, **extra: Any) -> Any:
     from replay.experiments.protocol import Protocol
 
-    priors = tuple(p.strip() for p in kw["priors"].split(",") if p.strip())
     return Protocol(
         runs=runs,
         movements=kw["movements"],
         n_r=kw["n_r"],
         n_l=kw["n_l"],
-        priors=priors,
+        priors=kw["priors"],
         frame_change=kw["frame_change"],
         seed=kw["seed"],
         n_l_movements=min(3, kw["movements"]),
         **extra,
     )
+
+
+def _needs_extras() -> None:
+    """Fail early, before anything is written, if the experiments extra is missing."""
+    from replay.extras import require
+
+    require("matplotlib", extra="experiments", feature="bslam experiment")
 
 
 @click.group("experiment")
@@ -142,21 +177,20 @@ def experiment() -> None:
 @_common
 @click.option(
     "--n-l-values",
-    default="50,100,200,300,500,1000",
+    default=",".join(str(n) for n in PAPER_N_L_VALUES),
     show_default=True,
+    callback=_int_list,
     help="Particle counts of the Fig. 8 sweep (empty: skip it).",
 )
 def paper(**kw: Any) -> None:
     """The paper's protocol: 40 runs of 10 movements, Fig. 1/7/8, methods, report."""
-    from replay.experiments.experiment import paper_experiment
+    _needs_extras()
+    from replay.experiments.experiment import paper_experiment, scenario_doc
     from replay.experiments.report import n_l_flatness, table_markdown
 
+    proto = _protocol(kw, 40 if kw["runs"] is None else kw["runs"], n_l_values=kw["n_l_values"])
+    scenario_doc(kw["scenario"])  # a bad scenario fails before the folder is made
     out = _out_dir(kw["out"], kw["force"])
-    proto = _protocol(
-        kw,
-        40 if kw["runs"] is None else kw["runs"],
-        n_l_values=_int_list(kw["n_l_values"], "--n-l-values"),
-    )
     results = paper_experiment(
         out,
         proto,
@@ -166,6 +200,7 @@ def paper(**kw: Any) -> None:
         progress=not kw["quiet"],
         command=_command(),
     )
+    _all_failed(results, out)
     _, spread = n_l_flatness(results)
     click.echo(table_markdown(results))
     if proto.n_l_values:
@@ -177,21 +212,25 @@ def paper(**kw: Any) -> None:
 @_common
 @click.option(
     "--param",
+    type=click.Choice(ALL_SWEEP_PARAMS),
     required=True,
-    help="bearing_noise_deg, vision_error_deg, movement_length_m, camera_model, "
-    "frame_change, n_l or n_landmarks (that many coded landmarks in the scenario's arena).",
+    help="The parameter to vary (n_landmarks: that many coded landmarks in the scenario's arena).",
 )
 @click.option("--values", required=True, help="Comma-separated values, e.g. 0.5,1,2.")
 def sweep(**kw: Any) -> None:
     """Vary one parameter: one group of runs per value, a figure, a table per value."""
-    from replay.experiments.experiment import sweep_experiment
+    _needs_extras()
+    from replay.experiments.experiment import scenario_doc, sweep_experiment
     from replay.experiments.report import sweep_table_markdown
 
-    out = _out_dir(kw["out"], kw["force"])
     values = [v.strip() for v in kw["values"].split(",") if v.strip()]
-    if not values:
-        raise ExperimentArgumentError("--values: give at least one value, e.g. 0.5,1,2")
+    try:
+        check_sweep_values(kw["param"], values)
+    except ProtocolError as exc:
+        raise click.BadParameter(str(exc), param_hint="'--values'") from None
     proto = _protocol(kw, 10 if kw["runs"] is None else kw["runs"])
+    scenario_doc(kw["scenario"])  # a bad scenario fails before the folder is made
+    out = _out_dir(kw["out"], kw["force"])
     results = sweep_experiment(
         out,
         kw["param"],
@@ -203,12 +242,24 @@ def sweep(**kw: Any) -> None:
         progress=not kw["quiet"],
         command=_command(),
     )
+    _all_failed(results, out)
     click.echo(sweep_table_markdown(results))
     _finish(results, out)
 
 
 def _command() -> str:
     return "bslam " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+
+
+def _all_failed(results: Any, out: Path) -> None:
+    """Exit 1 when no run succeeded, with the first run's reason."""
+    failed = results.failed()
+    if failed and len(failed) == len(results.runs):
+        first = failed[0]
+        raise NoRunSucceededError(
+            f"no run succeeded: all {len(failed)} failed, e.g. run {first.group}/{first.run} "
+            f"(seed {first.seed}) {first.status}; every run is in {out / 'results.json'}"
+        )
 
 
 def _finish(results: Any, out: Path) -> None:

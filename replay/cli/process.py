@@ -12,12 +12,18 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from replay.cli.follow import end_of_follow, follow_options
+from replay.cli.options import SEED
+from replay.experiments.protocol import PRIORS
 
 if TYPE_CHECKING:
     from replay.batch import LogJob
     from replay.records import MethodConfig
 
-PRIOR_CHOICES = ("impartial", "gaussian", "mixture")
+#: the prior names without importing numpy for --help (the same tuple as the experiments')
+PRIOR_CHOICES = PRIORS
+#: Largest particle counts: FR keeps n_r^2 observation points per movement (2000: 64 MB).
+MAX_N_R = 2_000
+MAX_N_L = 100_000
 #: --estimator choices, the default first (pipeline.estimators.ESTIMATORS; not imported here so
 #: that `bslam --help` stays light)
 ESTIMATOR_CHOICES = ("joint", "paper")
@@ -55,21 +61,21 @@ def method_options(fn: click.decorators.FC) -> click.decorators.FC:
             ),
             click.option(
                 "--n-r",
-                type=click.IntRange(2),
+                type=click.IntRange(2, MAX_N_R),
                 default=50,
                 show_default=True,
                 help="Particles per landmark in FR.",
             ),
             click.option(
                 "--n-l",
-                type=click.IntRange(2),
+                type=click.IntRange(2, MAX_N_L),
                 default=300,
                 show_default=True,
                 help="Particles per landmark in FL.",
             ),
             click.option(
                 "--seed",
-                type=int,
+                type=SEED,
                 default=0,
                 show_default=True,
                 help="Seed of the estimator's random generator.",

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
+from replay.cli.options import SEED, FiniteFloat
 from replay.cli.recording import frame_options, live_options
 
 
-def _distance_range(text: str) -> tuple[float, float]:
+def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tuple[float, float]:
     parts = text.split(",")
     try:
         values = [float(p) for p in parts]
@@ -15,7 +18,7 @@ def _distance_range(text: str) -> tuple[float, float]:
         raise click.BadParameter(f"expected D or MIN,MAX in metres, got {text!r}") from None
     if len(values) == 1:
         values = values * 2
-    if len(values) != 2 or not 0 < values[0] <= values[1]:
+    if len(values) != 2 or not 0 < values[0] <= values[1] < math.inf:
         raise click.BadParameter(f"expected D or MIN,MAX with 0 < MIN <= MAX, got {text!r}")
     return values[0], values[1]
 
@@ -49,16 +52,20 @@ def _distance_range(text: str) -> tuple[float, float]:
     "--distance",
     default="0.10,0.25",
     show_default=True,
+    callback=_distance_range,
     help="Straight distance D or range MIN,MAX, metres.",
 )
 @click.option(
-    "--turn-deg", type=float, default=None, help="Fixed turn before each drive (default random)."
+    "--turn-deg",
+    type=FiniteFloat(),
+    default=None,
+    help="Fixed turn before each drive (default random).",
 )
-@click.option("--seed", type=int, default=None, help="Seed of the random turns and distances.")
+@click.option("--seed", type=SEED, default=None, help="Seed of the random turns and distances.")
 @frame_options
 @click.option(
     "--baud",
-    type=int,
+    type=click.IntRange(min=1),
     default=9600,
     show_default=True,
     help="Serial baud rate of the robot's running mode (Khepera II: 9600 to 115200).",
@@ -66,9 +73,19 @@ def _distance_range(text: str) -> tuple[float, float]:
 @click.option(
     "--model", default="khepera2", show_default=True, help="Robot model name (for the log)."
 )
-@click.option("--mm-per-pulse", type=float, default=0.08, show_default=True, help="Encoder scale.")
 @click.option(
-    "--wheel-base", type=float, default=0.053, show_default=True, help="Wheel base, metres."
+    "--mm-per-pulse",
+    type=FiniteFloat(min=0, min_open=True),
+    default=0.08,
+    show_default=True,
+    help="Encoder scale.",
+)
+@click.option(
+    "--wheel-base",
+    type=FiniteFloat(min=0, min_open=True),
+    default=0.053,
+    show_default=True,
+    help="Wheel base, metres.",
 )
 @live_options
 def record(
@@ -78,7 +95,7 @@ def record(
     calibration: str,
     landmarks: str,
     moves: int,
-    distance: str,
+    distance: tuple[float, float],
     turn_deg: float | None,
     seed: int | None,
     frame_rate_hz: float,
@@ -99,63 +116,39 @@ def record(
 
     Ctrl-C (or SIGTERM) stops the motors and finishes the log cleanly (exit 130 / 143).
     """
-    import math
+    from recorder.record import RecordSettings
+    from recorder.start import RobotSessionSpec, record_robot_session
+    from replay.cli.recording import live_view, run_recording
 
-    import numpy as np
-
-    from recorder.camera import OpenCVCamera
-    from recorder.clock import SystemClock
-    from recorder.moves import random_moves
-    from recorder.record import CommandSink, RecordSettings, Rig, record_to_file
-    from recorder.robot import KheperaRobot, RobotConfig
-    from recorder.session import build_session_doc, load_calibration_file, load_landmark_file
-    from recorder.timebase import EpochClock
-    from replay.cli.recording import claim_log, live_view, run_recording
-
-    distance_m = _distance_range(distance)
     view = live_view(live, spawn, connect, save_rrd)
-    cal = load_calibration_file(calibration)
-    catalog = load_landmark_file(landmarks)
-    config = RobotConfig(
-        port=port, model=model, baudrate=baud, mm_per_pulse=mm_per_pulse, wheel_base_m=wheel_base
+
+    spec = RobotSessionSpec(
+        port=port,
+        camera_source=camera_source,
+        calibration_file=calibration,
+        landmark_file=landmarks,
+        moves=moves or None,
+        distance_m=distance,
+        turn_rad=None if turn_deg is None else math.radians(turn_deg),
+        seed=seed,
+        robot={
+            "model": model,
+            "baudrate": baud,
+            "mm_per_pulse": mm_per_pulse,
+            "wheel_base_m": wheel_base,
+        },
+        settings=RecordSettings(
+            frame_rate_hz=frame_rate_hz,
+            encoding="png" if encoding == "png" else "bgr8",
+            png_level=png_level,
+            chunk_compression="" if chunk_compression == "none" else chunk_compression,
+        ),
     )
-    settings = RecordSettings(
-        frame_rate_hz=frame_rate_hz,
-        encoding="png" if encoding == "png" else "bgr8",
-        png_level=png_level,
-        chunk_compression="" if chunk_compression == "none" else chunk_compression,
+    run_recording(
+        out,
+        lambda path, progress: record_robot_session(path, spec, progress=progress),
+        total=moves or None,
+        force=force,
+        inputs=[calibration, landmarks],
+        live=view,
     )
-    claim_log(out, force=force, inputs=[calibration, landmarks])  # before the robot moves
-    clock = EpochClock(SystemClock())
-    camera = OpenCVCamera(camera_source, cal)
-    try:
-        sink = CommandSink()
-        with KheperaRobot.open(config, clock, on_exchange=sink) as robot:
-            robot.version()  # the robot answers before the log is created
-            doc = build_session_doc(
-                created_unix_ns=clock.start_wall_ns,
-                robot=config.session_dict(),
-                camera_source=camera_source,
-                calibration=cal,
-                frame_rate_hz=frame_rate_hz,
-                encoding=settings.encoding,
-                landmarks=catalog.landmarks,
-                reference=catalog.reference,
-                vision_error_rad=catalog.vision_error_rad,
-                extra={"recorder": {"png_level": png_level, "seed": seed}},
-            )
-            turn_rad = None if turn_deg is None else math.radians(turn_deg)
-            plan = random_moves(np.random.default_rng(seed), moves or None, distance_m, turn_rad)
-            rig = Rig(robot=robot, sink=sink, camera=camera, clock=clock)
-            run_recording(
-                out,
-                lambda path, progress: record_to_file(
-                    path, doc, rig, plan, settings, progress=progress
-                ),
-                total=moves or None,
-                force=force,
-                inputs=[calibration, landmarks],
-                live=view,
-            )
-    finally:
-        camera.close()

@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from replay.cli.options import FiniteFloat
+
 if TYPE_CHECKING:
     from recorder.record import Progress, RecordResult
     from replay.live import LiveView
@@ -31,7 +33,7 @@ def frame_options(func: F) -> F:
             click.option(
                 "--rate",
                 "frame_rate_hz",
-                type=click.FloatRange(min=0, min_open=True),
+                type=FiniteFloat(min=0, min_open=True),
                 default=5.0,
                 show_default=True,
                 help="Frames per second while driving (virtual time when simulating).",
@@ -66,16 +68,6 @@ def frame_options(func: F) -> F:
     ):
         func = option(func)
     return func
-
-
-def claim_log(
-    out: str | os.PathLike[str], *, force: bool, inputs: Sequence[str | os.PathLike[str]] = ()
-) -> None:
-    """Refuse ``out`` now (one line) if it is an input, exists without ``force``, or cannot be
-    written (see :class:`data_schemas.outputs.OutputGuard`)."""
-    from data_schemas.outputs import OutputGuard
-
-    OutputGuard(inputs, force=force).claim(out, what="log")
 
 
 def live_options(func: F) -> F:
@@ -143,15 +135,15 @@ def run_recording(
     (None: unknown). A stop request (SIGINT/SIGTERM) finishes the log and exits with 128 + the
     signal number.
 
-    ``out`` is checked first (:func:`claim_log`). ``staged`` (a simulation in virtual time,
-    which can be run again): the log is written beside ``out`` and renamed onto it when
-    finished. Otherwise (a
+    ``out`` is checked first (:class:`data_schemas.outputs.OutputGuard`). ``staged`` (a log
+    that can be made again, as the demo's): it is written beside ``out`` and renamed onto it
+    when finished. Otherwise (a
     recording, whose log must be on disk as it grows) an existing ``out`` is moved aside to
     ``NAME.old-N.mcap`` (``force`` only), never overwritten.
 
     ``live``: a follower process shows the log as it grows (:class:`replay.live.LiveFollower`;
     the terminal view replaces the progress bar), reading the log at ``out`` itself (so a live
-    simulation is not staged); if the follower fails, the recording goes on and says so once.
+    log is never staged); if the follower fails, the recording goes on and says so once.
     """
     from tqdm import tqdm
 
@@ -176,8 +168,14 @@ def run_recording(
 
             follower = LiveFollower(live, path)
         try:
+            # delay: a session that fails at once (a bad file, no robot) leaves one line, no bar
             with tqdm(
-                total=total, unit="move", file=sys.stderr, desc="recording", disable=quiet
+                total=total,
+                unit="move",
+                file=sys.stderr,
+                desc="recording",
+                disable=quiet,
+                delay=0.5,
             ) as bar:
 
                 def progress(p: Progress) -> None:

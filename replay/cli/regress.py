@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import logging
+import shlex
 import sys
 from pathlib import Path
 
 import click
 
+from replay.cli.options import FiniteFloat
 from replay.cli.process import ESTIMATOR_CHOICES
 
 DEFAULT_DIR = Path("tests/data/regress")
@@ -22,7 +24,7 @@ DEFAULT_DIR = Path("tests/data/regress")
 )
 @click.option(
     "--tolerance",
-    type=click.FloatRange(0.0),
+    type=FiniteFloat(0.0),
     default=None,
     help="Largest allowed move of a landmark mean, FL units [default: 1e-3].",
 )
@@ -43,30 +45,33 @@ def regress(folder: Path, update: bool, tolerance: float | None, estimator: str 
     """
     from tqdm import tqdm
 
-    from replay.process import process_log, write_json
-    from replay.regress import MEAN_TOL, compare, find_cases, load_expected
+    from replay.regress import MEAN_TOL, CaseResult, find_cases, run_regression
+
+    total = len(find_cases(folder, update=update, estimator=estimator))
+    bar = tqdm(total=total, desc="regress", unit="log", file=sys.stderr, delay=0.5)
+
+    def report(result: CaseResult) -> None:
+        bar.update()
+        if result.status == "written":
+            tqdm.write(f"{result.case.name}: wrote {result.case.expected.name}")
+            return
+        tqdm.write(f"{result.case.name}: {'ok' if result.status == 'ok' else 'REGRESSION'}")
+        for line in result.diffs:
+            tqdm.write(f"  {line}")
 
     logging.getLogger("bslam").setLevel(logging.ERROR)  # skipped movements are in the diff
-    cases = find_cases(folder, update=update, estimator=estimator)
-    regressions = 0
-    for case in tqdm(cases, desc="regress", unit="log", file=sys.stderr):
-        expected = load_expected(case) if case.expected.is_file() else None
-        actual = process_log(case.log, case.method())
-        if update:
-            write_json(case.expected, actual)
-            tqdm.write(f"{case.name}: wrote {case.expected.name}")
-            continue
-        assert expected is not None
-        diffs = compare(expected, actual, mean_tol=MEAN_TOL if tolerance is None else tolerance)
-        if diffs:
-            regressions += 1
-            tqdm.write(f"{case.name}: REGRESSION")
-            for line in diffs:
-                tqdm.write(f"  {line}")
-        else:
-            tqdm.write(f"{case.name}: ok")
+    with bar:
+        results = run_regression(
+            folder,
+            update=update,
+            estimator=estimator,
+            mean_tol=MEAN_TOL if tolerance is None else tolerance,
+            on_case=report,
+        )
+    regressions = sum(r.status == "regression" for r in results)
     if regressions:
+        again = shlex.join(["bslam", "regress", str(folder), "--update"])
         raise click.ClickException(
-            f"{regressions} of {len(cases)} logs regressed; if the change is intended, run "
-            f"'bslam regress {folder} --update' and commit the expected files"
+            f"{regressions} of {len(results)} logs regressed; if the change is intended, run "
+            f"{again} and commit the expected files"
         )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import time
 from pathlib import Path
 
@@ -100,7 +101,7 @@ def replay(
                         rec.disconnect()
     click.echo(f"{log}: {result_line(doc)}")
     if save:
-        click.echo(f"wrote {save}; open it with: {viewer_command()} {save}")
+        click.echo(f"wrote {save}; open it with: {shlex.join([viewer_command(), str(save)])}")
     if isinstance(opened, FollowedLog) and not serve:
         end_of_follow(opened)
     if serve:

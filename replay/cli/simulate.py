@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from replay.cli.options import SEED, FiniteFloat
 from replay.cli.recording import frame_options, live_options
 
 
@@ -15,18 +16,18 @@ from replay.cli.recording import frame_options, live_options
     help="Scenario JSON file, or a built-in name (paper, paper_omni, coded_3x2).",
 )
 @click.option("--out", required=True, type=click.Path(dir_okay=False), help="Log to write.")
-@click.option("--seed", type=int, default=None, help="Replaces the scenario's trajectory.seed.")
+@click.option("--seed", type=SEED, default=None, help="Replaces the scenario's trajectory.seed.")
 @frame_options
 @click.option(
     "--turn-noise",
-    type=click.FloatRange(min=0),
+    type=FiniteFloat(min=0),
     default=0.02,
     show_default=True,
     help="Actuation noise: relative std of each turn.",
 )
 @click.option(
     "--distance-noise",
-    type=click.FloatRange(min=0),
+    type=FiniteFloat(min=0),
     default=0.02,
     show_default=True,
     help="Actuation noise: relative std of each straight distance.",
@@ -92,6 +93,5 @@ def simulate(
         total=scenario.trajectory.n_moves,
         force=force,
         inputs=[] if scenario_arg in BUILTIN_SCENARIOS else [scenario_arg],
-        staged=speed is None,  # a paced session is written in place, so it can be followed
         live=live_view(live, spawn, connect, save_rrd),
     )

@@ -14,17 +14,14 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from replay.experiments import plots
 from replay.experiments.geometry import describe, scored_landmarks
 from replay.experiments.protocol import (
     PROTOCOL_PARAMS,
-    SWEEP_PARAMS,
     Protocol,
-    ProtocolError,
     apply_protocol_param,
     apply_scenario_param,
+    check_sweep_values,
 )
 from replay.experiments.report import write_report, write_sweep_report
 from replay.experiments.results import CRB, Results, RunRecord, write_results
@@ -121,6 +118,10 @@ def paper_experiment(
     info = {"command": command, "workers": workers, "scheduler": scheduler, "stage_s": stages}
     info["runs_s"] = round(time.perf_counter() - start, 2)
     results = Results("paper", _config(protocol, doc), records, rows, info)
+    if not rows:  # every run failed: the results file says why, there is nothing to draw
+        results.info["elapsed_s"] = round(time.perf_counter() - start, 2)
+        write_results(results, out_dir)
+        return results
     figures = render_paper(results, out_dir)
     results.info["elapsed_s"] = round(time.perf_counter() - start, 2)
     write_results(results, out_dir)
@@ -147,20 +148,13 @@ def render_paper(results: Results, out_dir: Path) -> dict[str, str]:
 
 def fig1(results: Results, path: Path) -> Path:
     """The three priors of one bearing (eps of the experiment), as in the paper's Fig. 1."""
-    from pipeline.priors import make_prior, prior_density_grid, range_marginal
-    from replay.fig1 import N_ANGLE, R_MAX, R_MIN
+    from replay.fig1 import fig1_data
 
     eps_rad = math.radians(float(results.config["scenario"]["vision_error_deg"]))
-    half = R_MAX * math.tan(1.6 * eps_rad)
-    xs = np.linspace(0.0, R_MAX, 240)
-    ys = np.linspace(-half, half, 120)
-    r = np.linspace(R_MIN, R_MAX, 80)
-    densities, marginals = {}, {}
-    for name in ("impartial", "gaussian", "mixture"):
-        densities[name] = prior_density_grid(name, 0.0, eps_rad, R_MIN, R_MAX, xs, ys)
-        prior = make_prior(name, eps_rad, R_MIN, R_MAX)
-        marginals[name] = range_marginal(prior, r, n_angle=N_ANGLE)
-    return plots.fig1_priors(xs, ys, densities, r, marginals, path)
+    fig = fig1_data(eps_rad, nx=240, ny=120, nr=80)
+    ys = fig.ys[::-1]  # the plot's y axis points up
+    densities = {name: d[::-1] for name, d in fig.densities.items()}
+    return plots.fig1_priors(fig.xs, ys, densities, fig.r, fig.marginals, path)
 
 
 def sweep_experiment(
@@ -176,23 +170,25 @@ def sweep_experiment(
     command: str = "",
 ) -> Results:
     """One group of runs per value of ``param``; results, a sweep figure, table and report."""
+    from recorder.sim.scenario import scenario_from_dict
+
     start = time.perf_counter()
-    tasks: list[RunTask] = []
-    for value in values:
+    check_sweep_values(param, list(values))
+    groups: list[tuple[str, Protocol, dict[str, Any]]] = []
+    for value in values:  # every value is checked before any folder is made
         group = f"{param}={value}"
         proto, doc = protocol, None
         if param == "camera_model":
             doc = scenario_doc({"unwrapped": "paper", "omni": "paper_omni"}.get(value, value))
         elif param in PROTOCOL_PARAMS:
             proto = apply_protocol_param(protocol, param, value)
-        elif param in SWEEP_PARAMS:
-            doc = apply_scenario_param(scenario_doc(scenario), param, float(value))
         else:
-            known = ", ".join([*SWEEP_PARAMS, *PROTOCOL_PARAMS])
-            raise ProtocolError(f"unknown sweep parameter {param!r}; use one of {known}")
-        tasks += plan_runs(
-            replace(proto, n_l_values=()), doc or scenario_doc(scenario), out_dir, group
-        )
+            doc = apply_scenario_param(scenario_doc(scenario), param, float(value))
+            scenario_from_dict(doc, what=f"scenario with {group}")
+        groups.append((group, replace(proto, n_l_values=()), doc or scenario_doc(scenario)))
+    tasks: list[RunTask] = []
+    for group, proto, doc in groups:
+        tasks += plan_runs(proto, doc, out_dir, group)
     records, rows, stages = run_all(
         tasks, workers=workers, scheduler=scheduler, progress=progress, desc=f"sweep {param}"
     )
@@ -205,6 +201,8 @@ def sweep_experiment(
     results = Results(f"sweep of {param}", config, records, rows, info)
     results.info["elapsed_s"] = round(time.perf_counter() - start, 2)
     write_results(results, out_dir)
+    if not rows:  # every run failed: the results file says why, there is nothing to draw
+        return results
     final = results.config["protocol"]["movements"]
     early = min(results.config["protocol"]["n_l_movements"], final)
     name = plots.sweep(results, out_dir / f"sweep_{param}.png", sorted({early, final})).name

@@ -1,6 +1,6 @@
 """The experiment protocol: what a run does (methods, particle counts) and what it varies.
 
-:class:`Protocol` defaults are the paper's (METHOD.md section 7): 40 runs of 10 straight
+:class:`Protocol` defaults are the paper's (docs/method.md, part 7): 40 runs of 10 straight
 movements, n_r = 50, n_l = 300, eps = 3°, four landmarks with |L1 L2| = 30 cm in a 105 x 68 cm
 arena (the geometry lives in the scenario). A sweep changes one :data:`SWEEP_PARAMS` entry.
 """
@@ -8,11 +8,14 @@ arena (the geometry lives in the scenario). A sweep changes one :data:`SWEEP_PAR
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from data_schemas.errors import BslamError
 
+#: pipeline.priors.PriorName's values, spelled out here so that the CLI's option list (which
+#: imports this module) needs no numpy; tests/replay/test_experiment_paper.py checks they agree
 PRIORS = ("impartial", "gaussian", "mixture")
 FRAME_CHANGES = ("sampled", "exact")
 #: the paper's Fig. 8 particle counts
@@ -128,3 +131,35 @@ def apply_protocol_param(protocol: Protocol, param: str, value: str) -> Protocol
     if param == "n_l":
         return replace(protocol, n_l=int(value))
     raise ProtocolError(f"{param!r} is not a protocol parameter")
+
+
+#: every parameter ``bslam experiment sweep --param`` accepts
+ALL_SWEEP_PARAMS = (*SWEEP_PARAMS, *PROTOCOL_PARAMS)
+CAMERA_MODELS = ("unwrapped", "omni")
+
+
+def check_sweep_values(param: str, values: list[str]) -> None:
+    """Raise ProtocolError (one line) unless every value can be used for ``param``.
+
+    Scenario parameters take finite numbers, ``n_l`` integers of at least 2, ``frame_change``
+    one of :data:`FRAME_CHANGES`, ``camera_model`` one of :data:`CAMERA_MODELS` or a scenario
+    file. Whether a number makes a possible scenario is checked with the scenario itself.
+    """
+    if param not in ALL_SWEEP_PARAMS:
+        raise ProtocolError(
+            f"unknown sweep parameter {param!r}; use one of {', '.join(ALL_SWEEP_PARAMS)}"
+        )
+    if not values:
+        raise ProtocolError("give at least one value, e.g. 0.5,1,2")
+    for value in values:
+        if param in SWEEP_PARAMS:
+            try:
+                ok = math.isfinite(float(value))
+            except ValueError:
+                ok = False
+            if not ok:
+                raise ProtocolError(f"{param} takes finite numbers, got {value!r}")
+        elif param == "n_l" and not (value.isdigit() and int(value) >= 2):
+            raise ProtocolError(f"n_l takes integers of at least 2, got {value!r}")
+        elif param == "frame_change" and value not in FRAME_CHANGES:
+            raise ProtocolError(f"frame_change takes {' or '.join(FRAME_CHANGES)}, got {value!r}")

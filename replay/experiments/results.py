@@ -15,12 +15,13 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import BslamError
+from replay.experiments.protocol import PRIORS
 
 RESULTS_NAME = "results.json"
 CSV_NAME = "errors.csv"
 
 #: methods whose rows are estimates (the rest are bounds)
-ESTIMATORS = ("impartial", "gaussian", "mixture", "batch_ls")
+ESTIMATORS = (*PRIORS, "batch_ls")
 #: the Cramér–Rao bound rows: error_fl = sqrt(trace(CRB)), a Gaussian-equivalent line
 CRB = "crb"
 

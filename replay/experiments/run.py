@@ -160,7 +160,7 @@ def _context(task: RunTask, summary: dict[str, Any]) -> RunContext:
 def _sigma_rad(task: RunTask) -> float:
     """Std of the bearing error: the simulated noise (a Gaussian truncated at the vision error
     bound) plus the quantization of one panorama column (width / 2 pi columns per radian)."""
-    from recorder.sim.render import truncated_normal_std
+    from data_schemas.angles import truncated_normal_std
 
     cam = task.scenario["camera"]
     std = math.radians(float(cam.get("bearing_noise_deg", 0.0)))

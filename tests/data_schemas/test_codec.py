@@ -39,7 +39,7 @@ def test_nested_field_path_is_named() -> None:
 def test_missing_required_field() -> None:
     bad = _movement()
     del bad["index"]
-    with pytest.raises(SchemaError, match="'index' is a required property"):
+    with pytest.raises(SchemaError, match="field 'index': is missing"):
         encode("/robot/movement", bad)
 
 

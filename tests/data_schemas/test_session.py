@@ -2,7 +2,9 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
+import numpy as np
 import pytest
 
 from data_schemas.calibration import UnwrappedCalibration
@@ -44,7 +46,7 @@ def test_typed_view() -> None:
 
 def test_reference_must_be_in_catalog() -> None:
     doc = _doc() | {"reference": ["L1", "L9"]}
-    with pytest.raises(SchemaError, match="'L9' is not in the landmark catalog"):
+    with pytest.raises(SchemaError, match="'reference': 'L9' is not a landmark of the catalog"):
         session_from_doc(doc)
 
 
@@ -57,3 +59,35 @@ def test_unknown_colour_named() -> None:
 def test_missing_json_key() -> None:
     with pytest.raises(MissingMetadataError):
         session_from_metadata({})
+
+
+def test_catalog_rules_are_the_same_everywhere() -> None:
+    """Session documents, scenario files and the estimator refuse the same catalogs."""
+    from data_schemas.catalog import catalog_problem
+    from data_schemas.errors import EstimationError, ScenarioError
+    from pipeline import BearingSlam
+    from recorder.sim.scenario import builtin_scenario, scenario_from_dict
+
+    cases = [
+        (["A", "B", "A"], ["A", "B"], "landmarks[2].name", "duplicate landmark name 'A'"),
+        (["A", "B"], ["A", "C"], "reference", "'C' is not a landmark of the catalog"),
+        (["A", "B"], ["B", "B"], "reference", "the two reference landmarks must differ"),
+    ]
+    paper = builtin_scenario("paper").to_dict()
+    for names, ref, field, problem in cases:
+        found = catalog_problem(names, ref)
+        assert found is not None and found[0] == field and problem in found[1]
+        doc = {**paper, "reference": ref}
+        doc["landmarks"] = [
+            {**paper["landmarks"][i], "name": n, "x": 0.2 + 0.2 * i} for i, n in enumerate(names)
+        ]
+        with pytest.raises(ScenarioError, match=f"key '{re.escape(field)}': {problem}"):
+            scenario_from_dict(doc)
+        with pytest.raises(EstimationError, match=problem):
+            BearingSlam(
+                names,
+                (ref[0], ref[1]),
+                vision_error_rad=math.radians(3),
+                rng=np.random.default_rng(0),
+            )
+    assert catalog_problem(["A", "B"], ["A", "B"]) is None

@@ -1,4 +1,4 @@
-"""Cone intersection A_i, uniform sampling in it and degenerate geometry (METHOD.md section 3)."""
+"""Cone intersection A_i, uniform sampling in it, degenerate geometry (docs/method.md, part 3)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Change of frame FR -> FL and systematic resampling (METHOD.md section 4)."""
+"""Change of frame FR -> FL and systematic resampling (docs/method.md, part 4)."""
 
 from __future__ import annotations
 

@@ -114,6 +114,7 @@ def test_kde_log_density_near_and_far_from_every_kernel() -> None:
     assert math.isclose(float(kde.logpdf(pts[:1])[0]), float(want[0]), rel_tol=1e-12)
 
 
+@pytest.mark.slow
 def test_mixture_density_is_the_density_of_its_draws() -> None:
     """E[q^(x) / mix(x)] = E[p^(x) / mix(x)] = 1 over draws x ~ mix (importance identity)."""
     rng = np.random.default_rng(8)

@@ -1,4 +1,4 @@
-"""Properties of the impartial PDF and of the two baseline priors (METHOD.md section 2)."""
+"""Properties of the impartial PDF and of the two baseline priors (docs/method.md, part 2)."""
 
 from __future__ import annotations
 
@@ -23,10 +23,14 @@ span_s = st.floats(0.5, 50.0)
 angular_s = st.sampled_from(["gaussian", "uniform"])
 
 
-def _polar_integral(prior: ImpartialPrior, bearing: float, n: int = 200) -> float:
+#: 200 Gauss-Legendre nodes and weights on [-1, 1], computed once for every example
+NODES_200 = np.polynomial.legendre.leggauss(200)
+
+
+def _polar_integral(prior: ImpartialPrior, bearing: float) -> float:
     """∫∫ p(x, y) dx dy over the cone, by Gauss-Legendre in (r, a) with the r dr da element."""
-    xr, wr = np.polynomial.legendre.leggauss(n)
-    xa, wa = np.polynomial.legendre.leggauss(n)
+    xr, wr = NODES_200
+    xa, wa = NODES_200
     r = 0.5 * (prior.r_max - prior.r_min) * xr + 0.5 * (prior.r_max + prior.r_min)
     wr = wr * 0.5 * (prior.r_max - prior.r_min)
     a = bearing + prior.eps_rad * xa

@@ -57,6 +57,7 @@ class Updates:
 
 @pytest.fixture(scope="module")
 def trials() -> Trials:
+    """100 seeds x 10 movements (about 14 s on one core): the statistical tests are ``slow``."""
     by_move, final, ls, cov = [], [], [], []
     updates = Updates()
     for seed in SEEDS:
@@ -91,22 +92,26 @@ def trials() -> Trials:
     return Trials(np.array(by_move), np.array(final), np.array(ls), np.array(cov), updates)
 
 
+@pytest.mark.slow
 def test_error_falls_with_movements(trials: Trials) -> None:
     e = np.nanmean(trials.err_by_move, axis=(0, 2))
     assert e[9] < e[2] < e[0]
     assert e[9] < 0.5 * e[0]
 
 
+@pytest.mark.slow
 def test_particle_error_is_close_to_batch_least_squares(trials: Trials) -> None:
     ratio = trials.err_final.mean() / trials.err_ls.mean()
     assert ratio < 1.25, f"particle / LS error = {ratio:.3f}"
 
 
+@pytest.mark.slow
 def test_credible_region_is_calibrated(trials: Trials) -> None:
     rate = trials.covered.mean()
     assert 0.70 <= rate <= 0.90, f"80% region covers the truth in {rate:.2%} of trials"
 
 
+@pytest.mark.slow
 def test_defensive_proposal_trigger_rate(trials: Trials) -> None:
     # measured on these seeds: 135 of 1252 updates (10.8%); none has zero likelihood
     u = trials.updates
@@ -115,6 +120,7 @@ def test_defensive_proposal_trigger_rate(trials: Trials) -> None:
     assert u.zero == 0
 
 
+@pytest.mark.slow
 def test_defensive_proposal_trigger_rate_short_moves() -> None:
     """Movements of 8-12 cm: first beliefs from little parallax, wide (docs/method.md)."""
     updates = Updates()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from data_schemas.angles import wrap_rad
+from data_schemas.angles import truncated_normal_std, wrap_rad
 from data_schemas.calibration import Calibration, UnwrappedCalibration, default_omni
 from data_schemas.colors import NOMINAL_BGR
 from recorder.sim.render import (
@@ -17,7 +17,6 @@ from recorder.sim.render import (
     RenderedFrame,
     render_panorama,
     truncated_normal,
-    truncated_normal_std,
 )
 from recorder.sim.world import Arena, Landmark, Pose, SimWorld
 
@@ -86,7 +85,11 @@ def render_one(
 
 @pytest.mark.parametrize(
     ("cal", "n_poses"),
-    [(CALIBRATIONS[0], 12), (CALIBRATIONS[1], 12), (UnwrappedCalibration(1920, 960), 2)],
+    [
+        (CALIBRATIONS[0], 12),
+        (CALIBRATIONS[1], 12),
+        pytest.param(UnwrappedCalibration(1920, 960), 2, marks=pytest.mark.slow),
+    ],
     ids=["unwrapped", "omni", "unwrapped-1920x960"],
 )
 def test_centroid_matches_drawn_bearing(cal: Calibration, n_poses: int) -> None:

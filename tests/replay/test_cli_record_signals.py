@@ -127,6 +127,7 @@ def test_stop_signal_finishes_an_indexed_log(tmp_path: Path, robot_port: str, si
     assert commands[-1]["request"] == "D,0,0"  # the motors were stopped
 
 
+@pytest.mark.slow
 def test_sigkill_loses_at_most_the_last_second(tmp_path: Path, robot_port: str) -> None:
     out = tmp_path / "rec.mcap"
     proc = _start(_command(tmp_path, robot_port, out))

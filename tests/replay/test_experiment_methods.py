@@ -41,6 +41,7 @@ def mean_by_movement(rows: list[ErrorRow]) -> dict[int, float]:
     }
 
 
+@pytest.mark.slow
 def test_methods_fall_with_movements_and_respect_the_bound() -> None:
     rows: dict[str, list[ErrorRow]] = {"impartial": [], "mixture": [], "batch_ls": [], "crb": []}
     for run in range(6):

@@ -18,6 +18,7 @@ needs_simulate = pytest.mark.skipif(
 )
 
 
+@pytest.mark.slow
 @needs_simulate
 def test_tiny_paper_experiment_end_to_end(tmp_path: Path) -> None:
     out = tmp_path / "exp"
@@ -85,18 +86,45 @@ def run_cli(args: list[str]) -> tuple[int, str]:
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
-        (["--n-l-values", "50,abc"], "--n-l-values: expected comma-separated integers"),
-        (["--priors", "impartial,flat"], "unknown prior(s) ['flat']"),
-        (["--runs", "0"], "runs and movements must be at least 1"),
-        (["--frame-change", "fast"], "unknown frame change 'fast'"),
-        (["--scenario", "no/such/scenario.json"], "no/such/scenario.json"),
+        (["--n-l-values", "50,abc"], "'--n-l-values': expected comma-separated integers"),
+        (["--n-l-values", "50,1"], "particle counts must be at least 2"),
+        (["--priors", "impartial,flat"], "'--priors': expected a comma-separated list of"),
+        (["--runs", "0"], "'--runs': 0 is not in the range x>=1"),
+        (["--movements", "-3"], "'--movements'"),
+        (["--workers", "0"], "'--workers'"),
+        (["--n-r", "1"], "'--n-r'"),
+        (["--seed", "-1"], "'--seed': -1 is not in the range x>=0"),
+        (["--frame-change", "fast"], "'fast' is not one of 'sampled', 'exact'"),
     ],
 )
-def test_paper_bad_input_is_one_line_exit_1(tmp_path: Path, extra: list[str], message: str) -> None:
-    code, output = run_cli(["experiment", "paper", "--out", str(tmp_path / "o"), *extra])
+def test_paper_usage_error_is_exit_2_and_creates_nothing(
+    tmp_path: Path, extra: list[str], message: str
+) -> None:
+    out = tmp_path / "o"
+    code, output = run_cli(["experiment", "paper", "--out", str(out), *extra])
+    assert code == 2, output
+    lines = output.strip().splitlines()
+    assert message in lines[0] and lines[0].startswith("Error: ")
+    assert lines[1:] == ["Try 'cli experiment paper --help'."]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--scenario", "no/such/scenario.json"], "no/such/scenario.json"),
+        (["--scenario", "paper_omnii"], "paper_omnii"),
+    ],
+)
+def test_paper_bad_scenario_is_one_line_exit_1_and_creates_nothing(
+    tmp_path: Path, extra: list[str], message: str
+) -> None:
+    out = tmp_path / "o"
+    code, output = run_cli(["experiment", "paper", "--out", str(out), *extra])
     assert code == 1, output
     assert message in output
     assert len(output.strip().splitlines()) == 1
+    assert not out.exists()
 
 
 def test_out_is_a_file_and_unknown_sweep_param(tmp_path: Path) -> None:
@@ -107,8 +135,37 @@ def test_out_is_a_file_and_unknown_sweep_param(tmp_path: Path) -> None:
     code, output = run_cli(
         ["experiment", "sweep", "--out", str(tmp_path / "s"), "--param", "speed", "--values", "1"]
     )
-    assert code == 1 and "unknown sweep parameter 'speed'" in output
-    assert len(output.strip().splitlines()) == 1
+    assert code == 2 and "'speed' is not one of 'bearing_noise_deg'" in output
+    assert len(output.strip().splitlines()) == 2
+
+
+@pytest.mark.parametrize(
+    ("param", "values", "code", "message"),
+    [
+        ("n_l", "a,b", 2, "n_l takes integers of at least 2, got 'a'"),
+        ("n_l", "50,1", 2, "n_l takes integers of at least 2, got '1'"),
+        ("bearing_noise_deg", "1,nan", 2, "bearing_noise_deg takes finite numbers, got 'nan'"),
+        ("frame_change", "sampled,fast", 2, "frame_change takes sampled or exact, got 'fast'"),
+        (
+            "vision_error_deg",
+            "3,95",
+            1,
+            "scenario with vision_error_deg=95: field 'vision_error_deg': 95.0 is greater than",
+        ),
+        ("bearing_noise_deg", "-1", 1, "field 'camera.bearing_noise_deg': -1.0 is less than"),
+        ("camera_model", "unwrapped,fisheye", 1, "scenario file 'fisheye' does not exist"),
+    ],
+)
+def test_sweep_bad_values_are_one_line_and_create_nothing(
+    tmp_path: Path, param: str, values: str, code: int, message: str
+) -> None:
+    out = tmp_path / "s"
+    args = ["experiment", "sweep", "--out", str(out), "--param", param, "--values", values]
+    got, output = run_cli([*args, "--runs", "1", "--movements", "1", "--quiet"])
+    assert got == code, output
+    assert message in output.splitlines()[0]
+    assert len(output.strip().splitlines()) == code  # usage errors add the --help hint
+    assert not out.exists()
 
 
 @needs_simulate
@@ -177,3 +234,14 @@ def test_run_that_cannot_be_simulated_is_reported_in_one_line(tmp_path: Path) ->
     assert not outcome.ok and outcome.error is not None
     assert outcome.error.startswith("move 0: no turn and distance in [1.6, 2.4] m")
     assert "trajectory.distance" in outcome.error and "\n" not in outcome.error
+
+
+def test_prior_names_agree_with_the_estimator() -> None:
+    from typing import get_args
+
+    from pipeline.priors import PriorName
+    from replay.cli.process import PRIOR_CHOICES
+    from replay.experiments.protocol import PRIORS
+    from replay.records import PRIORS as RECORD_PRIORS
+
+    assert PRIORS == PRIOR_CHOICES == RECORD_PRIORS == get_args(PriorName)

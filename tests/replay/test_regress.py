@@ -6,6 +6,7 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from replay.cli import cli
@@ -106,3 +107,32 @@ def test_empty_folder_is_one_line(tmp_path: Path) -> None:
     result = CliRunner().invoke(cli, ["regress", str(tmp_path)])
     assert result.exit_code == 1
     assert "no NAME.mcap with NAME.expected.json" in result.output
+
+
+def test_run_regression_returns_one_result_per_case(tmp_path: Path) -> None:
+    from replay.regress import ToleranceError, run_regression
+
+    for f in ("unwrapped.mcap", "unwrapped.expected.json", "omni.mcap", "omni.expected.json"):
+        shutil.copy(DATA / f, tmp_path / f)
+    seen: list[str] = []
+    results = run_regression(tmp_path, on_case=lambda r: seen.append(r.case.name))
+    assert [(r.case.name, r.status, r.diffs) for r in results] == [
+        ("omni.mcap", "ok", []),
+        ("unwrapped.mcap", "ok", []),
+    ]
+    assert seen == ["omni.mcap", "unwrapped.mcap"]  # reported as each case finishes
+    expected = tmp_path / "omni.expected.json"
+    doc = json.loads(expected.read_text())
+    doc["landmarks"]["L3"]["mean"][1] -= 0.002
+    expected.write_text(json.dumps(doc))
+    omni, unwrapped = run_regression(tmp_path)
+    assert omni.status == "regression" and unwrapped.status == "ok"
+    assert omni.diffs == [d for d in omni.diffs if d.startswith("final L3: mean moved by 0.002")]
+    assert len(omni.diffs) == 1
+    assert run_regression(tmp_path, mean_tol=0.01)[0].status == "ok"  # within a looser bound
+    written = run_regression(tmp_path, update=True)
+    assert [r.status for r in written] == ["written", "written"]
+    assert [r.status for r in run_regression(tmp_path)] == ["ok", "ok"]
+    for bad in (float("nan"), float("inf"), -1.0):
+        with pytest.raises(ToleranceError):
+            run_regression(tmp_path, mean_tol=bad)
