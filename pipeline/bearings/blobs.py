@@ -150,19 +150,30 @@ def is_fringe(
 
 
 def is_squeezed(
-    blob: Blob, others: list[Blob], *, max_width_rad: float, bin_width_rad: float
+    blob: Blob,
+    others: list[Blob],
+    *,
+    max_width_rad: float,
+    bin_width_rad: float,
+    kin: list[bool] | None = None,
 ) -> bool:
-    """True if ``blob``, at most ``max_width_rad`` wide, touches blobs of ``others`` on both sides.
+    """True if ``blob``, at most ``max_width_rad`` wide, touches blobs of ``others`` on both
+    sides, or touches a larger one flagged in ``kin`` (parallel to ``others``).
 
-    A column where two landmarks meet side by side holds the top of one above the bottom of the
-    other (or blends of their colours): read as a band code it is a landmark that is not there.
+    A column where two landmarks meet holds the top of one above the bottom of the other (the
+    nearer one is taller), or blends of their colours: read as a band code it is a landmark
+    that is not there. ``kin`` marks the neighbours such a phantom could be made of (for codes:
+    those whose top or bottom band is the blob's). A far code that narrow in such company is
+    dropped with it: then it is not visible, never a wrong bearing.
     """
     if blob.width_rad > max_width_rad * (1.0 + 1e-9):
         return False
     left = right = False
-    for other in others:
+    for k, other in enumerate(others):
         offset = wrap_rad(other.bearing_rad - blob.bearing_rad)
         if abs(offset) <= 0.5 * (blob.width_rad + other.width_rad) + 0.75 * bin_width_rad:
+            if kin is not None and kin[k] and other.n_pixels > blob.n_pixels:
+                return True
             left |= offset < 0
             right |= offset > 0
     return left and right

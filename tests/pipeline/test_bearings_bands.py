@@ -228,6 +228,10 @@ def test_single_colour_landmarks_are_not_taken_from_bands() -> None:
         (LandmarkSpec("L9", None, bands=("red",)), "two or more bands"),
         (LandmarkSpec("L9", None, bands=("red", "red")), "adjacent bands"),
         (LandmarkSpec("L9", None, bands=("red", "teal")), "unknown colour 'teal'"),
+        (
+            LandmarkSpec("L9", None, (0, 90, 50), (10, 255, 255), bands=("red", "blue")),
+            "HSV override is for a single-colour landmark",
+        ),
     ],
 )
 def test_bad_codes_raise_one_clear_line(spec: LandmarkSpec, message: str) -> None:
