@@ -179,6 +179,22 @@ def is_squeezed(
     return left and right
 
 
+def is_covered(blob: Blob, others: list[Blob], *, fraction: float = 0.5) -> bool:
+    """True if one of ``others`` spans at least ``fraction`` of ``blob``'s angular extent.
+
+    Two band codes read over the same bearings cannot both be landmarks there (a nearer one
+    hides the farther one): where they overlap that much, the columns mix parts of both.
+    """
+    for other in others:
+        offset = abs(wrap_rad(other.bearing_rad - blob.bearing_rad))
+        shared = min(0.5 * blob.width_rad, offset + 0.5 * other.width_rad) - max(
+            -0.5 * blob.width_rad, offset - 0.5 * other.width_rad
+        )
+        if shared >= fraction * blob.width_rad:
+            return True
+    return False
+
+
 def component_blobs(
     mask: NDArray[np.uint8], layout: Layout, *, min_pixels: int
 ) -> tuple[list[Blob], int]:

@@ -22,6 +22,7 @@ from pipeline.bearings.bands import BandDecoder
 from pipeline.bearings.blobs import (
     Blob,
     component_blobs,
+    is_covered,
     is_fringe,
     is_squeezed,
     profile_blobs,
@@ -257,6 +258,7 @@ class BearingExtractor:
             )
         single_blobs = [(b, c.colors) for c in self._singles for b in out[c.label].blobs]
         for k, (cls, (blobs, largest)) in enumerate(zip(self._coded, coded, strict=True)):
+            other_codes = [b for j, (bj, _) in enumerate(coded) if j != k for b in bj]
             pairs = single_blobs + [
                 (b, self._coded[j].colors) for j, (bj, _) in enumerate(coded) if j != k for b in bj
             ]
@@ -268,6 +270,7 @@ class BearingExtractor:
                 for b in blobs
                 if not is_fringe(b, others, **fringe)
                 and not is_squeezed(b, others, kin=kin, **fringe)
+                and not is_covered(b, other_codes)
             ]
             out[cls.label] = ClassSightings(
                 cls.label, cls.landmarks, tuple(kept), largest, len(blobs) - len(kept), True
