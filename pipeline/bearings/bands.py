@@ -325,9 +325,12 @@ def _without_blends(stack: list[Run], hues: Sequence[float]) -> list[Run]:
 
 
 def _hue_between(h: float, a: float, b: float) -> bool:
-    """True if hue ``h`` lies strictly inside the shorter arc from ``a`` to ``b`` (0..180)."""
+    """True if hue ``h`` lies strictly inside the shorter arc from ``a`` to ``b`` (0..180);
+    for complementary ``a`` and ``b`` (both arcs equal) inside either arc."""
     ab = (b - a + 90.0) % 180.0 - 90.0
     ah = (h - a + 90.0) % 180.0 - 90.0
+    if abs(abs(ab) - 90.0) < 1e-9:
+        return 0.0 < abs(ah) < 90.0
     return ab * ah > 0 and abs(ah) < abs(ab)
 
 

@@ -150,22 +150,49 @@ def is_fringe(
 
 
 def is_squeezed(
-    blob: Blob, others: list[Blob], *, max_width_rad: float, bin_width_rad: float
+    blob: Blob,
+    others: list[Blob],
+    *,
+    max_width_rad: float,
+    bin_width_rad: float,
+    kin: list[bool] | None = None,
 ) -> bool:
-    """True if ``blob``, at most ``max_width_rad`` wide, touches blobs of ``others`` on both sides.
+    """True if ``blob``, at most ``max_width_rad`` wide, touches blobs of ``others`` on both
+    sides, or touches a larger one flagged in ``kin`` (parallel to ``others``).
 
-    A column where two landmarks meet side by side holds the top of one above the bottom of the
-    other (or blends of their colours): read as a band code it is a landmark that is not there.
+    A column where two landmarks meet holds the top of one above the bottom of the other (the
+    nearer one is taller), or blends of their colours: read as a band code it is a landmark
+    that is not there. ``kin`` marks the neighbours such a phantom could be made of (for codes:
+    those whose top or bottom band is the blob's). A far code that narrow in such company is
+    dropped with it: then it is not visible, never a wrong bearing.
     """
     if blob.width_rad > max_width_rad * (1.0 + 1e-9):
         return False
     left = right = False
-    for other in others:
+    for k, other in enumerate(others):
         offset = wrap_rad(other.bearing_rad - blob.bearing_rad)
         if abs(offset) <= 0.5 * (blob.width_rad + other.width_rad) + 0.75 * bin_width_rad:
+            if kin is not None and kin[k] and other.n_pixels > blob.n_pixels:
+                return True
             left |= offset < 0
             right |= offset > 0
     return left and right
+
+
+def is_covered(blob: Blob, others: list[Blob], *, fraction: float = 0.5) -> bool:
+    """True if one of ``others`` spans at least ``fraction`` of ``blob``'s angular extent.
+
+    Two band codes read over the same bearings cannot both be landmarks there (a nearer one
+    hides the farther one): where they overlap that much, the columns mix parts of both.
+    """
+    for other in others:
+        offset = abs(wrap_rad(other.bearing_rad - blob.bearing_rad))
+        shared = min(0.5 * blob.width_rad, offset + 0.5 * other.width_rad) - max(
+            -0.5 * blob.width_rad, offset - 0.5 * other.width_rad
+        )
+        if shared >= fraction * blob.width_rad:
+            return True
+    return False
 
 
 def component_blobs(

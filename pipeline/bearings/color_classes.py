@@ -160,6 +160,11 @@ def landmark_classes(catalog: Sequence[LandmarkSpec]) -> list[LandmarkClass]:
             problem = band_problem(spec.bands)
             if problem:
                 raise LandmarkCatalogError(f"landmark {spec.name!r}: {problem}")
+            if spec.hsv_lo is not None or spec.hsv_hi is not None:
+                raise LandmarkCatalogError(
+                    f"landmark {spec.name!r}: an HSV override is for a single-colour landmark; "
+                    "the bands of a code use the default box of each colour"
+                )
             for color in spec.bands:
                 _check_color(spec.name, color)
             colors = tuple(spec.bands)

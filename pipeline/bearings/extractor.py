@@ -22,6 +22,7 @@ from pipeline.bearings.bands import BandDecoder
 from pipeline.bearings.blobs import (
     Blob,
     component_blobs,
+    is_covered,
     is_fringe,
     is_squeezed,
     profile_blobs,
@@ -255,13 +256,21 @@ class BearingExtractor:
             out[cls.label] = ClassSightings(
                 cls.label, cls.landmarks, tuple(kept), largest, n_fringes
             )
-        singles = [b for blobs in out.values() for b in blobs.blobs]
+        single_blobs = [(b, c.colors) for c in self._singles for b in out[c.label].blobs]
         for k, (cls, (blobs, largest)) in enumerate(zip(self._coded, coded, strict=True)):
-            others = singles + [b for j, (bj, _) in enumerate(coded) if j != k for b in bj]
+            other_codes = [b for j, (bj, _) in enumerate(coded) if j != k for b in bj]
+            pairs = single_blobs + [
+                (b, self._coded[j].colors) for j, (bj, _) in enumerate(coded) if j != k for b in bj
+            ]
+            others = [b for b, _ in pairs]
+            ends = {cls.colors[0], cls.colors[-1]}
+            kin = [bool(ends & {colors[0], colors[-1]}) for _, colors in pairs]
             kept = [
                 b
                 for b in blobs
-                if not is_fringe(b, others, **fringe) and not is_squeezed(b, others, **fringe)
+                if not is_fringe(b, others, **fringe)
+                and not is_squeezed(b, others, kin=kin, **fringe)
+                and not is_covered(b, other_codes)
             ]
             out[cls.label] = ClassSightings(
                 cls.label, cls.landmarks, tuple(kept), largest, len(blobs) - len(kept), True

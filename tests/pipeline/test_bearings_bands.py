@@ -228,6 +228,10 @@ def test_single_colour_landmarks_are_not_taken_from_bands() -> None:
         (LandmarkSpec("L9", None, bands=("red",)), "two or more bands"),
         (LandmarkSpec("L9", None, bands=("red", "red")), "adjacent bands"),
         (LandmarkSpec("L9", None, bands=("red", "teal")), "unknown colour 'teal'"),
+        (
+            LandmarkSpec("L9", None, (0, 90, 50), (10, 255, 255), bands=("red", "blue")),
+            "HSV override is for a single-colour landmark",
+        ),
     ],
 )
 def test_bad_codes_raise_one_clear_line(spec: LandmarkSpec, message: str) -> None:
@@ -321,3 +325,36 @@ def test_decoder_keeps_apart_what_a_gap_separates() -> None:
     _paint(labels, [50, 51, 54, 55], [(5, 5, 15), (1, 15, 25)])  # two empty columns: two
     blobs, _ = decoder.decode(decoder.grid(labels))[0]
     assert sorted(round(b.width_rad / (2 * math.pi / 100)) for b in blobs) == [2, 2, 5]
+
+
+def test_a_sliver_between_complementary_colours_is_a_blend() -> None:
+    """Red over cyan meet through any hue (here yellow): the sliver is not a band."""
+    red_yellow, red_cyan = (0, 1), (0, 3)
+    decoder = _decoder(100, [red_yellow, red_cyan])
+    labels = np.zeros((40, 100), np.uint8)
+    _paint(labels, [30, 31, 32], [(0, 5, 15), (1, 15, 16), (3, 16, 26)])
+    out = decoder.decode(decoder.grid(labels))
+    assert out[0] == ([], 0)
+    (blob,), _ = out[1]
+    assert blob.n_pixels == 3 * 21  # its span, the blended row included
+
+
+def test_codes_read_over_the_same_bearings_are_both_dropped() -> None:
+    """Columns that mix two landmarks can read as two codes at once: neither is trusted."""
+    cal = UnwrappedCalibration(400, 40)
+    specs = [
+        LandmarkSpec("A", None, bands=("red", "green")),
+        LandmarkSpec("B", None, bands=("red", "cyan")),
+    ]
+    extractor = BearingExtractor(cal, specs)
+    image = np.full((40, 400, 3), 160, np.uint8)
+    red, green, cyan = ((0, 0, 220), (0, 200, 0), (220, 220, 0))
+    image[5:15, 100:104] = red
+    image[15:25, [100, 102]] = green  # the same red top above bottoms that alternate
+    image[15:25, [101, 103]] = cyan
+    image[5:15, 300:304] = red  # and a clean red-cyan elsewhere
+    image[15:25, 300:304] = cyan
+    found = extractor.extract_classes(image)
+    assert found["red-green"].blobs == ()
+    (only,) = found["red-cyan"].blobs
+    assert abs(math.degrees(only.bearing_rad - cal.bearing_of_column(302.0))) < 0.5
