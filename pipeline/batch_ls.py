@@ -25,21 +25,7 @@ from data_schemas.angles import wrap_rad
 from data_schemas.errors import EstimationError
 from pipeline.frame_change import to_fl
 from pipeline.slam import MovementObservation
-
-#: Minimal parallax (rad) for a triangulation to seed the solver.
-MIN_PARALLAX_RAD = math.radians(1.0)
-
-
-def triangulate_fr(b1_rad: float, b2_rad: float) -> NDArray[np.float64] | None:
-    """Intersection (2,) FR of the rays from (0,0) and (1,0), or None if they do not meet ahead."""
-    s = math.sin(b2_rad - b1_rad)
-    if abs(s) < math.sin(MIN_PARALLAX_RAD):
-        return None
-    r1 = math.sin(b2_rad) / s
-    r2 = math.sin(b1_rad) / s
-    if r1 <= 0.0 or r2 <= 0.0:
-        return None
-    return np.array([r1 * math.cos(b1_rad), r1 * math.sin(b1_rad)])
+from pipeline.triangulate import triangulate_fr
 
 
 def batch_least_squares(

@@ -119,3 +119,55 @@ def simulate_bearings(
         heads.append(h)
         start = end
     return SimulatedRun(obs, np.array(o1s), np.array(o2s), np.array(heads), lms)
+
+
+@dataclass(frozen=True)
+class Arena:
+    """A randomly drawn arena for stress tests (world frame, m, deg).
+
+    Attributes
+    ----------
+    size_m : (width, height)
+    landmarks_world : dict of name -> (x, y)
+    reference : (str, str)
+        Any two of the landmarks (not necessarily close to each other or to the robot).
+    bearing_noise_deg : float
+        Std of the bearing noise (Gaussian, truncated at eps).
+    move_m : (min, max)
+        Length range of the straight movements (scaled with the arena).
+    """
+
+    size_m: tuple[float, float]
+    landmarks_world: dict[str, tuple[float, float]]
+    reference: tuple[str, str]
+    bearing_noise_deg: float
+    move_m: tuple[float, float]
+
+
+def random_arena(
+    rng: np.random.Generator,
+    *,
+    max_size_m: tuple[float, float] = (3.0, 2.0),
+    extra_landmarks: tuple[int, int] = (2, 6),
+    noise_deg: tuple[float, float] = (0.0, 1.5),
+    spacing_m: float = 0.15,
+) -> Arena:
+    """Draw an arena: size up to ``max_size_m``, ``2 + extra`` landmarks at least ``spacing_m``
+    apart, a random reference pair, a bearing noise std in ``noise_deg``."""
+    w = float(rng.uniform(0.8, max_size_m[0]))
+    h = float(rng.uniform(0.6, min(max_size_m[1], w)))
+    n = 2 + int(rng.integers(extra_landmarks[0], extra_landmarks[1] + 1))
+    pts: dict[str, tuple[float, float]] = {}
+    while len(pts) < n:
+        p = rng.uniform([0.05, 0.05], [w - 0.05, h - 0.05])
+        if all(math.dist(p, q) > spacing_m for q in pts.values()):
+            pts[f"L{len(pts) + 1}"] = (float(p[0]), float(p[1]))
+    a, b = (int(i) for i in rng.choice(n, 2, replace=False))
+    scale = max(w, h) / ARENA_M[0]
+    return Arena(
+        (w, h),
+        pts,
+        (f"L{a + 1}", f"L{b + 1}"),
+        float(rng.uniform(*noise_deg)),
+        (0.10 * scale, 0.25 * scale),
+    )

@@ -1,12 +1,16 @@
 """The joint estimator: one factor graph over every keyframe and landmark, updated by iSAM2.
 
 Per movement: the paper's filter (:class:`pipeline.slam.BearingSlam`) runs first as the
-initializer; the movement is placed by resection against the landmarks already in the graph
-(L1, L2 included); every bearing of the movement becomes a bearing factor (Huber loss) or waits
-until its landmark enters the graph (rays from two or more placed keyframes that meet, or a
-tight particle belief of the initializer); iSAM2 updates the map; the bearing noise is estimated
-from the residuals; a divergence check re-initializes the graph from the initializer's particles.
-Covariances are iSAM2's marginals scaled by the estimated noise. Maths: docs/method.md.
+initializer. The map starts (bootstrap) with a batch solve of the first movements whose
+reference pair can be triangulated, once their bearings over-determine them; later movements are
+placed by resection against the landmarks already in the graph (L1, L2 included), and a movement
+that cannot be placed yet waits and is tried again as the map grows. Every bearing of a placed
+movement becomes a bearing factor (Huber loss) or waits until its landmark enters the graph
+(rays from placed keyframes that meet with enough parallax, or a tight particle belief of the
+initializer); iSAM2 updates the map; the bearing noise is estimated from the residuals; a
+divergence check re-initializes the graph from the initializer's particles. Covariances are
+iSAM2's marginals scaled by the estimated noise. Maths and departures from the paper:
+docs/method.md.
 """
 
 from __future__ import annotations
@@ -20,27 +24,37 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.angles import wrap_rad
 from data_schemas.errors import EstimationError
-from pipeline.batch_ls import triangulate_fr
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import to_fl
 from pipeline.joint import graph as g
-from pipeline.joint.geometry import MovementPose, Sightings, intersect_rays, resect
+from pipeline.joint.geometry import (
+    MovementPose,
+    Sightings,
+    intersect_rays,
+    predicted_bearings,
+    resect,
+)
 from pipeline.joint.noise import NoiseEstimate, estimate_noise
 from pipeline.joint.result import JointMovementResult
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation
+from pipeline.triangulate import triangulate_fr
 
 #: Smallest angle between two rays of a landmark for it to enter the graph by intersection, in
 #: units of eps (the paper's own bound for a usable cone intersection is 2 eps).
 MIN_RAY_PARALLAX_EPS = 2.0
-#: A movement is placed only if its resection's robust residual is at most this many eps.
+#: A movement is placed only if its resection's robust residual is at most this many eps ...
 RESECTION_MAX_EPS = 2.0
-#: ... and its start point (std, FL, at the prior noise) and length (std of log d) are this well
-#: determined by the bearings of mapped landmarks.
-RESECTION_MAX_STD_FL = 0.5
+#: ... and its start point (std at the prior noise, relative to its median distance to the
+#: landmarks it sees) and its length (std of log d) are this well determined.
+RESECTION_MAX_REL_STD = 0.25
 RESECTION_MAX_LOG_STD = 0.5
+#: The bootstrap waits for this many more bearings than unknowns (a check on its fit), unless
+#: every movement in it has a reference pair the paper would use (parallax over 2 eps).
+BOOTSTRAP_DOF = 2
 #: A particle belief of the initializer this tight (sqrt of the largest covariance eigenvalue,
 #: FL) puts its landmark in the graph at the belief's mean.
 TIGHT_BELIEF_FL = 0.1
@@ -52,13 +66,28 @@ JUMP_SIGMAS = 5.0
 RETUNE_RATIO = 1.5
 #: ... with at least this many degrees of freedom.
 RETUNE_DOF = 10
+#: A bearing this many eps from the map is taken out of the graph (the error bound is eps).
+REJECT_EPS = 2.0
+#: A rejected bearing this close (eps) to the map is put back.
+READMIT_EPS = 1.5
+#: More than this fraction of the bearings beyond REJECT_EPS eps: the map is wrong, not them.
+MAX_REJECT_FRACTION = 0.1
 
 
 @dataclass
 class _Movement:
+    """A movement's bearings (catalog landmarks, finite) and its commanded turn."""
+
     index: int
-    chained: bool
     turn_rad: float | None
+    bearings: list[g.Bearing]
+
+    def observation(self) -> MovementObservation:
+        """The bearings back as a :class:`MovementObservation`."""
+        ends: tuple[dict[str, float], dict[str, float]] = ({}, {})
+        for b in self.bearings:
+            ends[b.end][b.landmark] = b.bearing_rad
+        return MovementObservation(self.index, ends[0], ends[1], self.turn_rad)
 
 
 class JointSlam:
@@ -73,6 +102,9 @@ class JointSlam:
     turn_prior_sigma_rad : float or None
         Std of a prior on each turn in place from the commanded turn
         (``MovementObservation.turn_rad``); None (default) leaves the turn free.
+    divergence_rms_rad : float or None
+        The map counts as diverged when the robust RMS of its residuals exceeds this (default
+        eps), or when a landmark jumps (:data:`JUMP_FL` and :data:`JUMP_SIGMAS`).
     """
 
     def __init__(
@@ -87,6 +119,7 @@ class JointSlam:
         n_l: int = 300,
         robust: bool = True,
         turn_prior_sigma_rad: float | None = None,
+        divergence_rms_rad: float | None = None,
     ) -> None:
         self.paper = BearingSlam(
             landmarks,
@@ -104,27 +137,24 @@ class JointSlam:
         self.eps_rad = float(vision_error_rad)
         self.robust = robust
         self.turn_prior_sigma_rad = turn_prior_sigma_rad
+        self.divergence_rms_rad = self.eps_rad if divergence_rms_rad is None else divergence_rms_rad
         self.sigma0_rad = truncated_gaussian_std(self.eps_rad)
         self.sigma_model_rad = self.sigma0_rad
         self._lm_index = {n: i for i, n in enumerate(self.landmarks)}
-        self._moves: list[_Movement] = []
-        self._bearings: list[g.Bearing] = []
+        self._placed: dict[int, _Movement] = {}
+        self._waiting: dict[int, _Movement] = {}
+        self._links: set[tuple[int, int]] = set()
         self._in_graph: set[str] = set(reference)
         self._pending: dict[str, list[g.Bearing]] = {}
+        # iSAM2 factor index of each bearing in the graph; bearings taken out as outliers
+        self._factor_of: dict[g.Bearing, int] = {}
+        self._staged: list[tuple[int, g.Bearing]] = []
+        self._rejected: set[g.Bearing] = set()
         self._estimates: dict[str, LandmarkEstimate] = {}
         self.noise: NoiseEstimate | None = None
         self.reinitializations = 0
         self._isam = self._new_isam()
         self._values = gtsam.Values()
-        gauge = gtsam.NonlinearFactorGraph()
-        l1, l2 = (self._lm_index[r] for r in reference)
-        for f in g.gauge_factors(g.landmark_key(l1), g.landmark_key(l2)):
-            gauge.add(f)
-        init = gtsam.Values()
-        init.insert(g.landmark_key(l1), np.array([0.0, 0.0]))
-        init.insert(g.landmark_key(l2), np.array([1.0, 0.0]))
-        self._isam.update(gauge, init)
-        self._values = self._isam.calculateEstimate()
 
     # ------------------------------------------------------------------ state
     @staticmethod
@@ -135,17 +165,18 @@ class JointSlam:
         params.setFactorization("QR")
         return gtsam.ISAM2(params)
 
+    def _key(self, name: str) -> int:
+        return g.landmark_key(self._lm_index[name])
+
     def _point(self, name: str) -> NDArray[np.float64]:
-        return np.asarray(self._values.atPoint2(g.landmark_key(self._lm_index[name])), np.float64)
+        return np.asarray(self._values.atPoint2(self._key(name)), np.float64)
 
-    def _pose(self, movement: int, end: int) -> gtsam.Pose2:
-        return self._values.atPose2(g.pose_key(movement, end))
-
-    def _movement_pose(self, movement: int) -> MovementPose:
-        p1, p2 = self._pose(movement, 0), self._pose(movement, 1)
+    def _movement_pose(self, movement: int, values: gtsam.Values | None = None) -> MovementPose:
+        v = self._values if values is None else values
+        p1, p2 = v.atPose2(g.pose_key(movement, 0)), v.atPose2(g.pose_key(movement, 1))
         o1 = np.array([p1.x(), p1.y()])
         o2 = np.array([p2.x(), p2.y()])
-        return MovementPose(o1, p1.theta(), max(float(np.hypot(*(o2 - o1))), 1e-6))
+        return MovementPose(o1, p1.theta(), max(float(np.hypot(*(o2 - o1))), 1e-9))
 
     @property
     def estimates(self) -> dict[str, LandmarkEstimate]:
@@ -155,30 +186,29 @@ class JointSlam:
     @property
     def used_movements(self) -> list[int]:
         """Indices of the movements in the graph, in order."""
-        return [m.index for m in self._moves]
+        return sorted(self._placed)
+
+    @property
+    def waiting_movements(self) -> list[int]:
+        """Indices of the movements not placed (yet)."""
+        return sorted(self._waiting)
 
     @property
     def trajectory_fl(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Per movement in the graph, O1 and O2 as (1, 2) arrays in FL."""
+        """Per movement in the graph (index order), O1 and O2 as (1, 2) arrays in FL."""
         out = []
-        for m in self._moves:
-            mp = self._movement_pose(m.index)
+        for k in sorted(self._placed):
+            mp = self._movement_pose(k)
             out.append((mp.o1_fl[None, :], mp.o2_fl[None, :]))
         return out
 
     # ------------------------------------------------------------------ placement
-    def _sightings(self, obs: MovementObservation) -> Sightings:
-        pts, ends, bs = [], [], []
-        for end, bmap in enumerate((obs.bearings_o1_rad, obs.bearings_o2_rad)):
-            for name, b in bmap.items():
-                if name in self._in_graph and math.isfinite(b):
-                    pts.append(self._point(name))
-                    ends.append(end)
-                    bs.append(float(b))
+    def _sightings(self, m: _Movement) -> Sightings:
+        used = [b for b in m.bearings if b.landmark in self._in_graph]
         return Sightings(
-            np.array(pts, np.float64).reshape(-1, 2),
-            np.array(ends, np.int64),
-            np.array(bs, np.float64),
+            np.array([self._point(b.landmark) for b in used], np.float64).reshape(-1, 2),
+            np.array([b.end for b in used], np.int64),
+            np.array([b.bearing_rad for b in used], np.float64),
         )
 
     def _reference_guess(self, obs: MovementObservation) -> MovementPose | None:
@@ -195,22 +225,36 @@ class JointSlam:
         d = o[1] - o[0]
         return MovementPose(o[0], math.atan2(d[1], d[0]), float(np.hypot(*d)))
 
-    def _place(
-        self, obs: MovementObservation, chained: bool, paper_ok: bool
-    ) -> tuple[MovementPose, float] | str:
-        """The movement's pose by resection, or why it cannot be placed."""
-        s = self._sightings(obs)
+    def _paper_frame(self, obs: MovementObservation) -> bool:
+        """Whether both reference landmarks have the parallax the paper asks (over 2 eps)."""
+        b1, b2 = obs.bearings_o1_rad, obs.bearings_o2_rad
+        return all(
+            r in b1 and r in b2 and abs(wrap_rad(b2[r] - b1[r])) > 2.0 * self.eps_rad
+            for r in self.reference
+        )
+
+    def _place(self, m: _Movement) -> tuple[MovementPose, set[g.Bearing]] | str:
+        """The movement's pose by resection against the map and its bearings beyond
+        :data:`REJECT_EPS` eps of it (wrong detections), or why it cannot be placed."""
+        used = [b for b in m.bearings if b.landmark in self._in_graph]
+        s = self._sightings(m)
         n1 = int((s.end == 0).sum())
         n2 = int((s.end == 1).sum())
+        chained = m.index - 1 in self._placed
         need = 2 if chained else 4
         if n1 < 1 or n2 < 1 or n1 + n2 < need:
             return (
                 f"too few bearings of mapped landmarks ({n1} at O1, {n2} at O2; "
                 f"need one at each and {need} in all)"
             )
-        guess = self._reference_guess(obs)
-        o1_known = self._movement_pose(self._moves[-1].index).o2_fl if chained else None
-        found = resect(s, guesses=[] if guess is None else [guess], o1_known_fl=o1_known)
+        guess = self._reference_guess(m.observation())
+        o1_known = self._movement_pose(m.index - 1).o2_fl if chained else None
+        found = resect(
+            s,
+            guesses=[] if guess is None else [guess],
+            o1_known_fl=o1_known,
+            outlier_rad=RESECTION_MAX_EPS * self.eps_rad,
+        )
         if found is None:
             return "no bearing of a mapped landmark at O1"
         robust = 1.4826 * float(np.median(np.abs(found.residuals_rad)))
@@ -219,45 +263,246 @@ class JointSlam:
                 f"resection does not fit the map (robust residual {math.degrees(robust):.2f} "
                 f"deg > {RESECTION_MAX_EPS:g} eps)"
             )
-        pos = found.position_std_fl * self.sigma0_rad
+        reach = float(np.median(np.hypot(*(s.points_fl - found.pose.o1_fl).T)))
+        rel = found.position_std_fl * self.sigma0_rad / max(reach, 1e-9)
         logd = found.log_length_std * self.sigma0_rad
-        if pos > RESECTION_MAX_STD_FL or logd > RESECTION_MAX_LOG_STD:
+        if rel > RESECTION_MAX_REL_STD or logd > RESECTION_MAX_LOG_STD:
             return (
-                f"bearings of mapped landmarks do not determine the movement (std of O1 "
-                f"{pos:.2g} FL, of log length {logd:.2g})"
+                f"bearings of mapped landmarks do not determine the movement (relative std of "
+                f"O1 {rel:.2g}, of log length {logd:.2g})"
             )
-        return found.pose, robust
+        far = np.abs(found.residuals_rad) > REJECT_EPS * self.eps_rad
+        return found.pose, {b for b, out in zip(used, far, strict=True) if out}
+
+    def _links_of(self, k: int) -> list[tuple[int, int]]:
+        """In-place links of movement ``k`` to its placed neighbours."""
+        return [(a, b) for a, b in ((k - 1, k), (k, k + 1)) if {a, b} - {k} <= set(self._placed)]
+
+    def _link_factor(self, link: tuple[int, int]) -> gtsam.NonlinearFactor:
+        a, b = link
+        turn = self._placed[b].turn_rad if self.turn_prior_sigma_rad is not None else None
+        return g.in_place_factor(
+            g.pose_key(a, 1), g.pose_key(b, 0), turn, self.turn_prior_sigma_rad or 0.0
+        )
+
+    def _add(
+        self,
+        m: _Movement,
+        pose: MovementPose,
+        graph: gtsam.NonlinearFactorGraph,
+        values: gtsam.Values,
+        outliers: set[g.Bearing] | None = None,
+    ) -> None:
+        """Put a placed movement's poses, constraints and bearings into ``graph``/``values``
+        (``outliers`` stay out, as rejected)."""
+        links = self._links_of(m.index)
+        self._placed[m.index] = m
+        self._waiting.pop(m.index, None)
+        graph.add(g.straight_factor(g.pose_key(m.index, 0), g.pose_key(m.index, 1)))
+        for end, p2 in enumerate(_pose2s(pose)):
+            key = g.pose_key(m.index, end)
+            values.insert(key, p2)
+            graph.add(g.weak_pose_prior(key, p2))
+        for link in links:
+            self._links.add(link)
+            graph.add(self._link_factor(link))
+        noise = self._bearing_noise()
+        for b in m.bearings:
+            if outliers and b in outliers:
+                self._rejected.add(b)
+            elif b.landmark in self._in_graph:
+                self._add_bearing(graph, b, noise)
+            else:
+                self._pending.setdefault(b.landmark, []).append(b)
+
+    def _enter_pending(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> list[str]:
+        """Landmarks that can enter the graph now, with their waiting bearings."""
+        entered = []
+        noise = self._bearing_noise()
+        for name in sorted(self._pending, key=self._lm_index.__getitem__):
+            point = self._initial_point(name, values)
+            if point is None:
+                continue
+            values.insert(self._key(name), point)
+            graph.add(g.weak_point_prior(self._key(name), point))
+            for bearing in self._pending.pop(name):
+                self._add_bearing(graph, bearing, noise)
+            self._in_graph.add(name)
+            entered.append(name)
+        return entered
+
+    def _add_bearing(
+        self, graph: gtsam.NonlinearFactorGraph, b: g.Bearing, noise: gtsam.noiseModel.Base
+    ) -> None:
+        """Add a bearing factor to ``graph``, remembering where (for its iSAM2 index)."""
+        self._staged.append((graph.size(), b))
+        graph.add(self._bearing_factor(b, noise))
+
+    def _update(
+        self,
+        graph: gtsam.NonlinearFactorGraph,
+        values: gtsam.Values,
+        remove: Sequence[int] = (),
+    ) -> None:
+        """One iSAM2 update (plus one more relinearization step), factor indices recorded."""
+        result = self._isam.update(graph, values, list(remove))
+        index = result.getNewFactorsIndices()
+        for pos, b in self._staged:
+            self._factor_of[b] = int(index[pos])
+        self._staged.clear()
+        self._isam.update()
+        self._values = self._isam.calculateEstimate()
+
+    def _reject_outliers(self) -> None:
+        """Take out bearings beyond :data:`REJECT_EPS` eps of the map; put back rejected ones
+        within :data:`READMIT_EPS` eps.
+
+        The method's bearing error is bounded by eps, so a residual that far is a wrong
+        detection (the Huber loss only bounds its pull)."""
+        used, r = self._residuals()
+        out = [
+            b
+            for b, x in zip(used, r, strict=True)
+            if b not in self._rejected and abs(x) > REJECT_EPS * self.eps_rad
+        ]
+        back = [
+            b
+            for b, x in zip(used, r, strict=True)
+            if b in self._rejected and abs(x) <= READMIT_EPS * self.eps_rad
+        ]
+        if not out and not back:
+            return
+        graph = gtsam.NonlinearFactorGraph()
+        noise = self._bearing_noise()
+        for b in back:
+            self._rejected.discard(b)
+            self._add_bearing(graph, b, noise)
+        remove = [self._factor_of.pop(b) for b in out]
+        self._rejected.update(out)
+        self._update(graph, gtsam.Values(), remove)
+
+    def _place_waiting(self) -> list[int]:
+        """Place every waiting movement the map can place now (again while any is placed)."""
+        placed: list[int] = []
+        progress = True
+        while progress and self._waiting:
+            progress = False
+            for k in sorted(self._waiting):
+                m = self._waiting[k]
+                found = self._place(m)
+                if isinstance(found, str):
+                    continue
+                graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+                self._add(m, found[0], graph, values, found[1])
+                self._enter_pending(graph, values)
+                self._update(graph, values)
+                placed.append(k)
+                progress = True
+        return placed
+
+    def _bootstrap(self) -> list[int] | str:
+        """Start the map: one batch solve over the waiting movements with a reference frame."""
+        guesses = {}
+        for k in sorted(self._waiting):
+            guess = self._reference_guess(self._waiting[k].observation())
+            if guess is not None:
+                guesses[k] = guess
+        if not guesses:
+            return "no movement sees the reference pair with parallax yet (the map starts there)"
+        seeds: dict[str, list[NDArray[np.float64]]] = {}
+        for k, guess in guesses.items():
+            obs = self._waiting[k].observation()
+            for name, b1 in obs.bearings_o1_rad.items():
+                b2 = obs.bearings_o2_rad.get(name)
+                if name in self.reference or b2 is None:
+                    continue
+                p = triangulate_fr(b1, b2)
+                if p is not None:
+                    c, sn = math.cos(guess.heading_rad), math.sin(guess.heading_rad)
+                    p_fl = guess.o1_fl + guess.length_fl * np.array(
+                        [c * p[0] - sn * p[1], sn * p[0] + c * p[1]]
+                    )
+                    seeds.setdefault(name, []).append(p_fl)
+        n_bearings = sum(
+            1
+            for k in guesses
+            for b in self._waiting[k].bearings
+            if b.landmark in self.reference or b.landmark in seeds
+        )
+        n_links = sum(1 for k in guesses if k - 1 in guesses)
+        dof = n_bearings - (4 * len(guesses) - 2 * n_links + 2 * len(seeds))
+        paper_frames = all(self._paper_frame(self._waiting[k].observation()) for k in guesses)
+        if dof < (0 if paper_frames else BOOTSTRAP_DOF):
+            return (
+                f"waiting for more bearings to start the map ({dof} more bearings than unknowns, "
+                f"need {BOOTSTRAP_DOF})"
+            )
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        l1, l2 = self.reference
+        for f in g.gauge_factors(self._key(l1), self._key(l2)):
+            graph.add(f)
+        values.insert(self._key(l1), np.array([0.0, 0.0]))
+        values.insert(self._key(l2), np.array([1.0, 0.0]))
+        for name, pts in seeds.items():
+            point = np.median(np.array(pts), axis=0)
+            values.insert(self._key(name), point)
+            graph.add(g.weak_point_prior(self._key(name), point))
+            self._in_graph.add(name)
+        for k, guess in guesses.items():
+            self._add(self._waiting[k], guess, graph, values)
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(100)
+        try:
+            solved = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        except RuntimeError as exc:
+            solved = None
+            why = f"bootstrap failed ({str(exc).strip().splitlines()[0]})"
+        if solved is not None:
+            self._values = solved
+            _, r = self._residuals()
+            robust = 1.4826 * float(np.median(np.abs(r))) if r.size else 0.0
+            why = (
+                f"bootstrap does not fit (robust residual {math.degrees(robust):.2f} deg > eps)"
+                if robust > self.eps_rad
+                else ""
+            )
+        if why or solved is None:  # undo: the movements wait again
+            for k in guesses:
+                self._waiting[k] = self._placed.pop(k)
+            self._links.clear()
+            self._in_graph = set(self.reference)
+            self._pending.clear()
+            self._staged.clear()
+            self._values = gtsam.Values()
+            return why or "bootstrap failed"
+        self._isam = self._new_isam()
+        self._update(graph, solved)
+        return sorted(guesses)
 
     # ------------------------------------------------------------------ landmarks
-    def _try_enter(self, name: str, new_values: gtsam.Values) -> bool:
+    def _initial_point(self, name: str, values: gtsam.Values) -> NDArray[np.float64] | None:
         """Initial value for a landmark not in the graph, from its rays or the particles."""
-        rays = self._pending.get(name, [])
         origins, dirs = [], []
-        for b in rays:
+        for b in self._pending.get(name, []):
             key = g.pose_key(b.movement, b.end)
-            pose = new_values.atPose2(key) if new_values.exists(key) else self._values.atPose2(key)
+            pose = values.atPose2(key) if values.exists(key) else self._values.atPose2(key)
             origins.append((pose.x(), pose.y()))
             dirs.append(pose.theta() + b.bearing_rad)
         fix = intersect_rays(
             np.array(origins, np.float64).reshape(-1, 2), np.array(dirs), 2.0 * self.eps_rad
         )
-        point = None
         if (
             fix is not None
             and fix.parallax_rad >= MIN_RAY_PARALLAX_EPS * self.eps_rad
             and fix.rms_rad <= self.eps_rad
         ):
-            point = fix.point_fl
-        else:
-            belief = self.paper.estimates.get(name)
-            if belief is not None:
-                spread = math.sqrt(max(float(np.linalg.eigvalsh(belief.cov_fl)[-1]), 0.0))
-                if spread <= TIGHT_BELIEF_FL:
-                    point = belief.mean_fl
-        if point is None:
-            return False
-        new_values.insert(g.landmark_key(self._lm_index[name]), np.asarray(point, np.float64))
-        return True
+            return fix.point_fl
+        belief = self.paper.estimates.get(name)
+        if belief is not None:
+            spread = math.sqrt(max(float(np.linalg.eigvalsh(belief.cov_fl)[-1]), 0.0))
+            if spread <= TIGHT_BELIEF_FL:
+                return np.asarray(belief.mean_fl, np.float64)
+        return None
 
     # ------------------------------------------------------------------ graph
     def _bearing_noise(self) -> gtsam.noiseModel.Base:
@@ -265,47 +510,39 @@ class JointSlam:
 
     def _bearing_factor(self, b: g.Bearing, noise: gtsam.noiseModel.Base) -> gtsam.NonlinearFactor:
         return g.bearing_factor(
-            g.pose_key(b.movement, b.end),
-            g.landmark_key(self._lm_index[b.landmark]),
-            b.bearing_rad,
-            noise,
+            g.pose_key(b.movement, b.end), self._key(b.landmark), b.bearing_rad, noise
         )
 
-    def _movement_factors(self, m: _Movement, prev: int | None) -> list[gtsam.NonlinearFactor]:
-        out = [g.straight_factor(g.pose_key(m.index, 0), g.pose_key(m.index, 1))]
-        if m.chained and prev is not None:
-            use_turn = self.turn_prior_sigma_rad is not None and m.turn_rad is not None
-            out.append(
-                g.in_place_factor(
-                    g.pose_key(prev, 1),
-                    g.pose_key(m.index, 0),
-                    m.turn_rad if use_turn else None,
-                    self.turn_prior_sigma_rad or 0.0,
-                )
-            )
-        return out
+    def _bearings(self, rejected: bool = True) -> list[g.Bearing]:
+        """Every bearing of the placed movements whose landmark is in the graph (with or
+        without the rejected ones)."""
+        return [
+            b
+            for k in sorted(self._placed)
+            for b in self._placed[k].bearings
+            if b.landmark in self._in_graph and (rejected or b not in self._rejected)
+        ]
 
     def _full_graph(self, values: gtsam.Values) -> gtsam.NonlinearFactorGraph:
         """Every factor of the map (for a rebuild), weak priors at ``values``."""
         graph = gtsam.NonlinearFactorGraph()
-        l1, l2 = (self._lm_index[r] for r in self.reference)
-        for f in g.gauge_factors(g.landmark_key(l1), g.landmark_key(l2)):
+        l1, l2 = self.reference
+        for f in g.gauge_factors(self._key(l1), self._key(l2)):
             graph.add(f)
         for name in self._in_graph - set(self.reference):
-            key = g.landmark_key(self._lm_index[name])
+            key = self._key(name)
             graph.add(g.weak_point_prior(key, np.asarray(values.atPoint2(key), np.float64)))
-        prev: int | None = None
-        for m in self._moves:
-            for f in self._movement_factors(m, prev):
-                graph.add(f)
+        for k in sorted(self._placed):
+            graph.add(g.straight_factor(g.pose_key(k, 0), g.pose_key(k, 1)))
             for end in (0, 1):
-                key = g.pose_key(m.index, end)
+                key = g.pose_key(k, end)
                 graph.add(g.weak_pose_prior(key, values.atPose2(key)))
-            prev = m.index
+        for link in sorted(self._links):
+            graph.add(self._link_factor(link))
         noise = self._bearing_noise()
-        for b in self._bearings:
-            if b.landmark in self._in_graph:
-                graph.add(self._bearing_factor(b, noise))
+        self._factor_of.clear()
+        for b in self._bearings(rejected=False):
+            self._add_bearing(graph, b, noise)
         return graph
 
     def _rebuild(self, values: gtsam.Values) -> None:
@@ -317,62 +554,50 @@ class JointSlam:
         with contextlib.suppress(RuntimeError):
             values = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
         self._isam = self._new_isam()
-        self._isam.update(graph, values)
-        self._isam.update()
-        self._values = self._isam.calculateEstimate()
+        self._update(graph, values)
 
     def _values_from_particles(self) -> gtsam.Values:
         """Initial values from the initializer's beliefs, keyframes re-placed against them."""
         values = gtsam.Values()
         for name in self._in_graph:
-            key = g.landmark_key(self._lm_index[name])
             belief = self.paper.estimates.get(name)
             point = belief.mean_fl if belief is not None else self._point(name)
-            values.insert(key, np.asarray(point, np.float64))
-        self._values = values
-        for k, m in enumerate(self._moves):
-            obs = MovementObservation(
-                m.index,
-                {
-                    b.landmark: b.bearing_rad
-                    for b in self._bearings
-                    if (b.movement, b.end) == (m.index, 0)
-                },
-                {
-                    b.landmark: b.bearing_rad
-                    for b in self._bearings
-                    if (b.movement, b.end) == (m.index, 1)
-                },
+            values.insert(self._key(name), np.asarray(point, np.float64))
+        old, self._values = self._values, values
+        for k in sorted(self._placed):
+            m = self._placed[k]
+            s = self._sightings(m)
+            o1_known = self._movement_pose(k - 1, values).o2_fl if k - 1 in self._placed else None
+            found = (
+                resect(
+                    s,
+                    guesses=[],
+                    o1_known_fl=o1_known,
+                    outlier_rad=RESECTION_MAX_EPS * self.eps_rad,
+                )
+                if s.bearings_rad.size
+                else None
             )
-            s = self._sightings(obs)
-            o1_known = None
-            if m.chained and k > 0:
-                prev = self._moves[k - 1].index
-                o1_known = _pose_o2(values, prev)
-            found = resect(s, guesses=[], o1_known_fl=o1_known) if s.bearings_rad.size else None
-            pose = found.pose if found is not None else MovementPose(np.zeros(2), 0.0, 0.1)
+            pose = found.pose if found is not None else self._movement_pose(k, old)
             for end, p in enumerate(_pose2s(pose)):
-                values.insert(g.pose_key(m.index, end), p)
+                values.insert(g.pose_key(k, end), p)
         return values
 
     # ------------------------------------------------------------------ checks
     def _residuals(self) -> tuple[list[g.Bearing], NDArray[np.float64]]:
-        used = [b for b in self._bearings if b.landmark in self._in_graph]
+        used = self._bearings()
         if not used:
             return used, np.zeros(0)
-        poses = [self._pose(b.movement, b.end) for b in used]
+        poses = [self._values.atPose2(g.pose_key(b.movement, b.end)) for b in used]
         o = np.array([(p.x(), p.y()) for p in poses])
         h = np.array([p.theta() for p in poses])
         pts = np.array([self._point(b.landmark) for b in used])
-        d = pts - o
-        pred = np.arctan2(d[:, 1], d[:, 0]) - h
         meas = np.array([b.bearing_rad for b in used])
-        r = np.angle(np.exp(1j * (meas - pred)))
+        r = np.asarray(wrap_rad(meas - predicted_bearings(o, h, pts)), np.float64)
         return used, r
 
     def _n_params(self) -> int:
-        chains = sum(1 for m in self._moves if m.chained)
-        return 2 * (len(self._in_graph) - 2) + 4 * len(self._moves) - 2 * chains
+        return 2 * (len(self._in_graph) - 2) + 4 * len(self._placed) - 2 * len(self._links)
 
     def _jumped(self, before: dict[str, LandmarkEstimate]) -> str:
         for name, prev in before.items():
@@ -385,19 +610,27 @@ class JointSlam:
         return ""
 
     def _check(self, before: dict[str, LandmarkEstimate]) -> str:
-        _, r = self._residuals()
+        """Why the map looks diverged (empty if it does not)."""
+        used, r = self._residuals()
+        far = sum(
+            1
+            for b, x in zip(used, r, strict=True)
+            if b not in self._rejected and abs(x) > REJECT_EPS * self.eps_rad
+        )
+        if far > max(1, MAX_REJECT_FRACTION * r.size):
+            return f"{far} of {r.size} bearings more than {REJECT_EPS:g} eps from the map"
         noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
-        if noise.robust_rms_rad > self.eps_rad:
-            return f"robust residual RMS {math.degrees(noise.robust_rms_rad):.2f} deg > eps"
+        if noise.robust_rms_rad > self.divergence_rms_rad:
+            limit = math.degrees(self.divergence_rms_rad)
+            return f"robust residual RMS {math.degrees(noise.robust_rms_rad):.2f} deg > {limit:.2f}"
         return self._jumped(before)
 
     def _update_estimates(self) -> None:
         _, r = self._residuals()
         self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
         n = self.noise
-        if n.dof >= RETUNE_DOF and abs(math.log(n.sigma_rad / self.sigma_model_rad)) > math.log(
-            RETUNE_RATIO
-        ):
+        off = abs(math.log(n.sigma_rad / self.sigma_model_rad))
+        if n.dof >= RETUNE_DOF and off > math.log(RETUNE_RATIO):
             self.sigma_model_rad = n.sigma_rad
             self._rebuild(self._values)
             _, r = self._residuals()
@@ -405,8 +638,7 @@ class JointSlam:
         scale = (self.noise.sigma_rad / self.sigma_model_rad) ** 2
         out = {}
         for name in sorted(self._in_graph - set(self.reference), key=self._lm_index.__getitem__):
-            key = g.landmark_key(self._lm_index[name])
-            cov = np.asarray(self._isam.marginalCovariance(key), np.float64) * scale
+            cov = np.asarray(self._isam.marginalCovariance(self._key(name)), np.float64) * scale
             out[name] = LandmarkEstimate(self._point(name), 0.5 * (cov + cov.T))
         self._estimates = out
 
@@ -417,7 +649,6 @@ class JointSlam:
         res = JointMovementResult(
             obs.index,
             "ok",
-            skipped_landmarks=dict(p.skipped_landmarks),
             fused=list(p.fused),
             defensive=list(p.defensive),
             cones_fr=p.cones_fr,
@@ -425,103 +656,73 @@ class JointSlam:
             particles_fl=p.particles_fl,
             belief_fl=p.belief_fl,
         )
-        for name in list(res.skipped_landmarks):
-            if name not in self.landmarks:
-                continue
-            res.skipped_landmarks.pop(name)  # the joint map uses single keyframes too
-        clean = MovementObservation(
-            obs.index,
-            {
-                n: float(b)
-                for n, b in obs.bearings_o1_rad.items()
-                if n in self._lm_index and math.isfinite(b)
-            },
-            {
-                n: float(b)
-                for n, b in obs.bearings_o2_rad.items()
-                if n in self._lm_index and math.isfinite(b)
-            },
-            obs.turn_rad,
-        )
-        chained = bool(self._moves) and self._moves[-1].index == obs.index - 1
-        placed = self._place(clean, chained, p.status == "ok")
-        if isinstance(placed, str):
-            res.status = f"skipped: {placed}"
-            res.estimates = self.estimates
-            res.noise = self.noise
-            return res
-        pose, _ = placed
-        res.placement = "reference pair" if p.status == "ok" else "resection"
+        # the paper's per-landmark skips concern its two-view cones; the joint map uses every
+        # single bearing, so only names outside the catalog are reported
+        res.skipped_landmarks = {
+            n: r for n, r in p.skipped_landmarks.items() if n not in self._lm_index
+        }
+        bearings = [
+            g.Bearing(obs.index, end, name, float(b))
+            for end, bmap in enumerate((obs.bearings_o1_rad, obs.bearings_o2_rad))
+            for name, b in bmap.items()
+            if name in self._lm_index and math.isfinite(b)
+        ]
+        if obs.index in self._placed or obs.index in self._waiting:
+            raise EstimationError(f"movement {obs.index} was already processed")
+        m = _Movement(obs.index, obs.turn_rad, bearings)
+        self._waiting[obs.index] = m
         before = self.estimates
-        move = _Movement(obs.index, chained, obs.turn_rad)
-        prev = self._moves[-1].index if chained else None
-        new_graph = gtsam.NonlinearFactorGraph()
-        new_values = gtsam.Values()
-        for f in self._movement_factors(move, prev):
-            new_graph.add(f)
-        for end, p2 in enumerate(_pose2s(pose)):
-            key = g.pose_key(obs.index, end)
-            new_values.insert(key, p2)
-            new_graph.add(g.weak_pose_prior(key, p2))
-        self._moves.append(move)
-        noise = self._bearing_noise()
-        for end, bmap in enumerate((clean.bearings_o1_rad, clean.bearings_o2_rad)):
-            for name, b in bmap.items():
-                bearing = g.Bearing(obs.index, end, name, b)
-                self._bearings.append(bearing)
-                if name in self._in_graph:
-                    new_graph.add(self._bearing_factor(bearing, noise))
-                else:
-                    self._pending.setdefault(name, []).append(bearing)
-        for name in sorted(self._pending, key=self._lm_index.__getitem__):
-            if self._try_enter(name, new_values):
-                key = g.landmark_key(self._lm_index[name])
-                new_graph.add(g.weak_point_prior(key, np.asarray(new_values.atPoint2(key))))
-                for bearing in self._pending.pop(name):
-                    new_graph.add(self._bearing_factor(bearing, noise))
-                self._in_graph.add(name)
-                res.entered.append(name)
-        self._isam.update(new_graph, new_values)
-        self._isam.update()
-        self._values = self._isam.calculateEstimate()
-        why = self._check(before)
-        if why:
-            res.divergence = why
+        placed: list[int] = []
+        why = ""
+        if not self._placed:
+            boot = self._bootstrap()
+            if isinstance(boot, str):
+                why = boot
+            else:
+                placed = boot
+                graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+                self._enter_pending(graph, values)
+                self._update(graph, values)
+        if self._placed:
+            placed += self._place_waiting()
+        if obs.index not in self._placed:
+            reason = why or self._place(m)
+            res.status = "skipped: " + (reason if isinstance(reason, str) else "not placed")
+        if not placed:
+            res.estimates, res.noise = self.estimates, self.noise
+            return res
+        res.placement = "reference pair" if p.status == "ok" else "resection"
+        res.also_placed = [k for k in placed if k != obs.index]
+        divergence = self._check(before)
+        if divergence:
+            res.divergence = divergence
             self.reinitializations += 1
             self._rebuild(self._values_from_particles())
+        self._reject_outliers()
         self._update_estimates()
-        res.estimates = self.estimates
-        res.noise = self.noise
-        mp = self._movement_pose(obs.index)
-        res.o1_fl, res.o2_fl = mp.o1_fl[None, :], mp.o2_fl[None, :]
-        res.residuals_rad = self._movement_residuals(clean)
+        res.estimates, res.noise = self.estimates, self.noise
+        if obs.index in self._placed:
+            mp = self._movement_pose(obs.index)
+            res.o1_fl, res.o2_fl = mp.o1_fl[None, :], mp.o2_fl[None, :]
+            res.residuals_rad = self._movement_residuals(m)
+        else:
+            res.placement = ""
         return res
 
-    def _movement_residuals(
-        self, obs: MovementObservation
-    ) -> dict[str, tuple[float | None, float | None]]:
-        out: dict[str, tuple[float | None, float | None]] = {}
-        mp = self._movement_pose(obs.index)
-        for name in sorted(
-            set(obs.bearings_o1_rad) | set(obs.bearings_o2_rad), key=self._lm_index.__getitem__
-        ):
-            if name not in self._in_graph:
+    def _movement_residuals(self, m: _Movement) -> dict[str, tuple[float | None, float | None]]:
+        """Bearing residuals (rad) of one placed movement, per landmark in the graph."""
+        out: dict[str, list[float | None]] = {}
+        mp = self._movement_pose(m.index)
+        for b in m.bearings:
+            if b.landmark not in self._in_graph:
                 continue
-            pt = self._point(name)
-            pair: list[float | None] = []
-            for o, bmap in ((mp.o1_fl, obs.bearings_o1_rad), (mp.o2_fl, obs.bearings_o2_rad)):
-                b = bmap.get(name)
-                if b is None:
-                    pair.append(None)
-                    continue
-                pred = math.atan2(pt[1] - o[1], pt[0] - o[0]) - mp.heading_rad
-                pair.append(math.remainder(b - pred, 2.0 * math.pi))
-            out[name] = (pair[0], pair[1])
-        return out
-
-
-def _params(pose: MovementPose) -> NDArray[np.float64]:
-    return np.array([pose.o1_fl[0], pose.o1_fl[1], pose.heading_rad, math.log(pose.length_fl)])
+            o = mp.o1_fl if b.end == 0 else mp.o2_fl
+            pt = self._point(b.landmark)
+            pred = math.atan2(pt[1] - o[1], pt[0] - o[0]) - mp.heading_rad
+            out.setdefault(b.landmark, [None, None])[b.end] = float(wrap_rad(b.bearing_rad - pred))
+        return {
+            n: (v[0], v[1]) for n, v in sorted(out.items(), key=lambda kv: self._lm_index[kv[0]])
+        }
 
 
 def _pose2s(pose: MovementPose) -> tuple[gtsam.Pose2, gtsam.Pose2]:
@@ -530,8 +731,3 @@ def _pose2s(pose: MovementPose) -> tuple[gtsam.Pose2, gtsam.Pose2]:
         gtsam.Pose2(float(pose.o1_fl[0]), float(pose.o1_fl[1]), pose.heading_rad),
         gtsam.Pose2(float(o2[0]), float(o2[1]), pose.heading_rad),
     )
-
-
-def _pose_o2(values: gtsam.Values, movement: int) -> NDArray[np.float64]:
-    p = values.atPose2(g.pose_key(movement, 1))
-    return np.array([p.x(), p.y()])

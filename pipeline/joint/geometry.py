@@ -78,12 +78,16 @@ class Sightings:
     def residuals(self, params: NDArray[np.float64]) -> NDArray[np.float64]:
         """Wrapped bearing errors (..., k) for movement parameters (..., 4) = x, y, h, log d."""
         x, y, h, logd = (params[..., i, None] for i in range(4))
-        d = np.exp(logd) * self.end
+        d = np.exp(np.clip(logd, -30.0, 30.0)) * self.end
         ox = x + d * np.cos(h)
         oy = y + d * np.sin(h)
         pred = np.arctan2(self.points_fl[:, 1] - oy, self.points_fl[:, 0] - ox) - h
         out: NDArray[np.float64] = wrap_rad(self.bearings_rad - pred)
         return out
+
+    def subset(self, keep: NDArray[np.bool_]) -> Sightings:
+        """The sightings selected by a mask (k,)."""
+        return Sightings(self.points_fl[keep], self.end[keep], self.bearings_rad[keep])
 
 
 def _heading_from(s: Sightings, o1_fl: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -95,28 +99,35 @@ def _heading_from(s: Sightings, o1_fl: NDArray[np.float64]) -> NDArray[np.float6
     return out
 
 
-def _jacobian(s: Sightings, x: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]:
-    """d(predicted bearing)/d(params) (k, 4), forward differences."""
-    step = 1e-7
-    jac = np.empty((r.size, 4))
-    for i in range(4):
-        dx = np.zeros(4)
-        dx[i] = step
-        jac[:, i] = -(wrap_rad(s.residuals(x + dx) - r)) / step
-    return jac
+def _jacobian(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """d(predicted bearing)/d(x, y, h, log d) (k, 4) at parameters ``x`` (4,)."""
+    h, d = x[2], math.exp(x[3]) * s.end
+    c, sn = math.cos(h), math.sin(h)
+    dx = s.points_fl[:, 0] - (x[0] + d * c)
+    dy = s.points_fl[:, 1] - (x[1] + d * sn)
+    r2 = np.maximum(dx * dx + dy * dy, 1e-300)
+    da_dox = dy / r2  # d atan2(dy, dx) / d(observer x)
+    da_doy = -dx / r2
+    return np.column_stack(
+        (
+            da_dox,
+            da_doy,
+            -1.0 + da_dox * (-d * sn) + da_doy * (d * c),
+            da_dox * (d * c) + da_doy * (d * sn),
+        )
+    )
 
 
 def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[np.float64]:
-    """Levenberg-Marquardt on the 4 movement parameters (numeric Jacobian)."""
+    """Levenberg-Marquardt on the 4 movement parameters."""
     x, lam = x0.copy(), 1e-3
     r = s.residuals(x)
     cost = float(r @ r)
     for _ in range(iters):
-        jac = _jacobian(s, x, r)
+        jac = _jacobian(s, x)  # residual = measured - predicted: d residual = -jac
         a = jac.T @ jac
-        g = jac.T @ r
         try:
-            delta = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), -g)
+            delta = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), jac.T @ r)
         except np.linalg.LinAlgError:
             break
         cand = x + delta
@@ -124,7 +135,7 @@ def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[n
         c = float(rc @ rc)
         if c < cost:
             x, r, lam = cand, rc, lam * 0.3
-            done = cost - c < 1e-14 * max(cost, 1e-30)
+            done = cost - c < 1e-12 * cost
             cost = c
             if done:
                 break
@@ -145,6 +156,8 @@ class Resection:
         The best fit.
     residuals_rad : (k,) float
         Bearing errors at the fit.
+    inliers : (k,) bool
+        The bearings the fit used (the others were beyond ``outlier_rad``).
     position_std_fl : float
         Std (FL) of O1 along its worst direction for a bearing noise of std 1 rad (scale by the
         noise; inf when the bearings do not determine the movement).
@@ -154,6 +167,7 @@ class Resection:
 
     pose: MovementPose
     residuals_rad: NDArray[np.float64]
+    inliers: NDArray[np.bool_]
     position_std_fl: float
     log_length_std: float
 
@@ -163,25 +177,29 @@ def resect(
     *,
     guesses: list[MovementPose],
     o1_known_fl: NDArray[np.float64] | None = None,
+    outlier_rad: float | None = None,
 ) -> Resection | None:
     """Place a movement from bearings of known points (O1 free, or known when chained).
 
-    Starts from ``guesses``, from ``o1_known_fl`` (the previous movement's end, the robot turns
-    in place) and from a grid of start points over the known points' box; the best few of these
+    Starts from ``guesses`` and from ``o1_known_fl`` (the previous movement's end: the robot
+    turns in place) or, without it, from a grid of start points over the known points' box
+    (1 FL margin); the best few of these
     (heading from the O1 bearings, length searched on :data:`LENGTHS_FL`) are refined by
-    Levenberg-Marquardt. None if there are no bearings at O1 (the heading is then unknown).
+    Levenberg-Marquardt. With ``outlier_rad``, the worst bearing beyond it is dropped and the fit
+    redone, while more than four remain (wrong detections). None if there are no bearings at O1
+    (the heading is then unknown).
     """
     if not np.any(s.end == 0) or s.points_fl.shape[0] == 0:
         return None
-    lo = s.points_fl.min(axis=0) - 1.0
-    hi = s.points_fl.max(axis=0) + 1.0
-    gx, gy = np.meshgrid(
-        np.linspace(lo[0], hi[0], GRID_STEPS), np.linspace(lo[1], hi[1], GRID_STEPS)
-    )
-    starts = [np.column_stack((gx.ravel(), gy.ravel()))]
     if o1_known_fl is not None:
-        starts.insert(0, np.asarray(o1_known_fl, np.float64)[None, :])
-    o1 = np.vstack(starts)
+        o1 = np.asarray(o1_known_fl, np.float64).reshape(1, 2)
+    else:
+        lo = s.points_fl.min(axis=0) - 1.0
+        hi = s.points_fl.max(axis=0) + 1.0
+        gx, gy = np.meshgrid(
+            np.linspace(lo[0], hi[0], GRID_STEPS), np.linspace(lo[1], hi[1], GRID_STEPS)
+        )
+        o1 = np.column_stack((gx.ravel(), gy.ravel()))
     h = _heading_from(s, o1)
     n, m = o1.shape[0], LENGTHS_FL.size
     cand = np.empty((n, m, 4))
@@ -190,7 +208,7 @@ def resect(
     cand[..., 2] = h[:, None]
     cand[..., 3] = np.log(LENGTHS_FL)[None, :]
     cost = (s.residuals(cand.reshape(-1, 4)) ** 2).sum(axis=1)
-    order = np.argsort(cost)[:4]
+    order = np.argsort(cost)[: 2 if o1_known_fl is not None else 4]
     seeds = [cand.reshape(-1, 4)[i] for i in order]
     seeds += [
         np.array([g.o1_fl[0], g.o1_fl[1], g.heading_rad, math.log(g.length_fl)]) for g in guesses
@@ -204,8 +222,14 @@ def resect(
             best = (x, c)
     assert best is not None
     x = best[0]
+    keep = np.ones(s.bearings_rad.size, bool)
     r = s.residuals(x)
-    info = (lambda j: j.T @ j)(_jacobian(s, x, r))
+    while outlier_rad is not None and keep.sum() > 4 and np.abs(r[keep]).max() > outlier_rad:
+        keep[np.flatnonzero(keep)[np.argmax(np.abs(r[keep]))]] = False  # a wrong detection
+        x = _refine(s.subset(keep), x)
+        r = s.residuals(x)
+    jac = _jacobian(s.subset(keep), x)
+    info = jac.T @ jac
     if o1_known_fl is not None:  # the turn in place pins O1 (to first order)
         info[0, 0] += 1e12
         info[1, 1] += 1e12
@@ -218,7 +242,7 @@ def resect(
     if not (math.isfinite(pos) and math.isfinite(logd)) or np.linalg.cond(info) > 1e14:
         pos = logd = math.inf
     pose = MovementPose(x[:2].copy(), float(wrap_rad(float(x[2]))), float(math.exp(x[3])))
-    return Resection(pose, r, pos, logd)
+    return Resection(pose, r, keep, pos, logd)
 
 
 @dataclass(frozen=True)

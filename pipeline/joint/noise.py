@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 #: Pseudo observations of the prior guess.
-NU0 = 2.0
+NU0 = 0.5
 #: Residuals beyond this many robust standard deviations do not count (wrong detections).
 OUTLIER_K = 4.0
 #: Smallest noise the estimate reports (rad): 0.02 deg.

@@ -20,8 +20,8 @@ class JointMovementResult(MovementResult):
     placement : str
         ``"reference pair"`` (the paper could use the movement too), ``"resection"`` (placed
         against the landmarks in the map) or ``""`` (skipped).
-    entered : list of str
-        Landmarks that entered the graph with this movement.
+    also_placed : list of int
+        Earlier movements that waited (not placeable then) and entered the map with this one.
     residuals_rad : dict name -> (at O1, at O2)
         This movement's bearing residuals under the map after it (None: not in the graph).
     noise : NoiseEstimate or None
@@ -31,7 +31,7 @@ class JointMovementResult(MovementResult):
     """
 
     placement: str = ""
-    entered: list[str] = field(default_factory=list)
+    also_placed: list[int] = field(default_factory=list)
     residuals_rad: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
     noise: NoiseEstimate | None = None
     divergence: str = ""

@@ -247,6 +247,34 @@ def sweep(**kw: Any) -> None:
     _finish(results, out)
 
 
+@experiment.command("arenas")
+@_common
+def arenas(**kw: Any) -> None:
+    """Random arenas (up to 3 x 2 m, other reference pairs, both cameras, noise 0-1.5 deg):
+    the joint estimator against batch least squares, the paper filter and the bound."""
+    import json
+
+    from replay.experiments.arenas import arenas_experiment
+
+    proto = _protocol(kw, 100 if kw["runs"] is None else kw["runs"])
+    out = _out_dir(kw["out"], kw["force"])
+    results = arenas_experiment(
+        out,
+        proto,
+        workers=kw["workers"],
+        scheduler=kw["scheduler"],
+        progress=not kw["quiet"],
+        command=_command(),
+    )
+    _all_failed(results, out)
+    (out / "goals.json").write_text(json.dumps(results.info["goals"], indent=1) + "\n")
+    click.echo(json.dumps(results.info["goals"], indent=1))
+    failed = results.failed()
+    for r in failed:
+        click.echo(f"run {r.group}/{r.run} (seed {r.seed}) {r.status}", err=True)
+    click.echo(f"{len(results.runs) - len(failed)}/{len(results.runs)} runs ok; {out}")
+
+
 def _command() -> str:
     return "bslam " + " ".join(shlex.quote(a) for a in sys.argv[1:])
 

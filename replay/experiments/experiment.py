@@ -41,8 +41,8 @@ def scenario_doc(name_or_path: str) -> dict[str, Any]:
 
 def methods_of(protocol: Protocol) -> list[str]:
     """The methods an experiment scores, in table order."""
-    extra = (["batch_ls"] if protocol.batch_ls else []) + ([CRB] if protocol.crb else [])
-    return [*protocol.priors, *extra]
+    extra = (["joint"] if protocol.joint else []) + (["batch_ls"] if protocol.batch_ls else [])
+    return [*protocol.priors, *extra, *([CRB] if protocol.crb else [])]
 
 
 def plan_runs(

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from data_schemas.errors import EstimationError
 from pipeline.batch_ls import batch_least_squares
 from pipeline.crb import cramer_rao_bound
+from pipeline.estimators import make_estimator
 from pipeline.slam import BearingSlam, MovementObservation
 from replay.experiments.results import CRB, ErrorRow
 from replay.experiments.scoring import score_rows
@@ -99,6 +100,32 @@ def estimator_rows(
         result = slam.process_movement(obs)
         est = {n: (e.mean_fl, e.cov_fl) for n, e in result.estimates.items()}
         rows += ctx.rows(est, method=prior, n_l=n_l, movement=k)
+    return rows
+
+
+def joint_rows(
+    observations: Sequence[MovementObservation],
+    ctx: RunContext,
+    *,
+    n_r: int,
+    n_l: int,
+    rng: np.random.Generator,
+) -> list[ErrorRow]:
+    """Run the joint estimator (initialized by the paper's filter) over the observations."""
+    slam = make_estimator(
+        "joint",
+        ctx.landmarks,
+        ctx.reference,
+        vision_error_rad=ctx.vision_error_rad,
+        n_r=n_r,
+        n_l=n_l,
+        rng=rng,
+    )
+    rows = []
+    for k, obs in enumerate(observations, start=1):
+        result = slam.process_movement(obs)
+        est = {n: (e.mean_fl, e.cov_fl) for n, e in result.estimates.items()}
+        rows += ctx.rows(est, method="joint", n_l=0, movement=k)
     return rows
 
 

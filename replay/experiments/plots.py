@@ -23,6 +23,7 @@ METHOD_COLORS = {
     "impartial": "tab:blue",
     "gaussian": "tab:orange",
     "mixture": "tab:green",
+    "joint": "tab:purple",
     "batch_ls": "tab:red",
     CRB: "black",
 }
@@ -30,6 +31,7 @@ METHOD_LABELS = {
     "impartial": "impartial PDF",
     "gaussian": "single Gaussian",
     "mixture": "Gaussian mixture",
+    "joint": "joint estimator (GTSAM)",
     "batch_ls": "batch least squares",
     CRB: "Cramér–Rao bound",
 }

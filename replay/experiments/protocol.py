@@ -44,8 +44,9 @@ class Protocol:
         Particle counts of the Fig. 8 sweep (impartial prior, first ``n_l_movements`` movements).
     n_l_movements : int
         Movements scored in the n_l sweep (the paper: 3).
-    batch_ls, crb : bool
-        Also score batch least squares and the Cramér–Rao bound on the same bearings.
+    joint, batch_ls, crb : bool
+        Also score the joint estimator, batch least squares and the Cramér–Rao bound on the same
+        bearings.
     frame_change : str
         ``sampled`` (n_l random triples, O(n_l)) or ``exact`` (all n_r^3 triples, reduced).
     seed : int
@@ -59,6 +60,7 @@ class Protocol:
     priors: tuple[str, ...] = PRIORS
     n_l_values: tuple[int, ...] = PAPER_N_L_VALUES
     n_l_movements: int = 3
+    joint: bool = True
     batch_ls: bool = True
     crb: bool = True
     frame_change: str = "sampled"

@@ -21,7 +21,7 @@ RESULTS_NAME = "results.json"
 CSV_NAME = "errors.csv"
 
 #: methods whose rows are estimates (the rest are bounds)
-ESTIMATORS = (*PRIORS, "batch_ls")
+ESTIMATORS = (*PRIORS, "joint", "batch_ls")
 #: the Cramér–Rao bound rows: error_fl = sqrt(trace(CRB)), a Gaussian-equivalent line
 CRB = "crb"
 
@@ -41,7 +41,8 @@ class ErrorRow:
     run : int
         Run index within the group.
     method : str
-        ``impartial``, ``gaussian``, ``mixture``, ``batch_ls`` or ``crb``.
+        ``impartial``, ``gaussian``, ``mixture`` (the paper's filter with each prior), ``joint``
+        (the joint estimator), ``batch_ls`` or ``crb``.
     n_l : int
         Particles per landmark in FL (0 for ``batch_ls`` and ``crb``).
     movement : int

@@ -22,6 +22,7 @@ from replay.experiments.methods import (
     batch_ls_rows,
     crb_rows,
     estimator_rows,
+    joint_rows,
     observations_from_summary,
     summary_rows,
 )
@@ -63,7 +64,9 @@ def run_one(task: RunTask) -> RunOutput:
     out.seconds["simulate"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
-    method = MethodConfig(prior="impartial", n_r=proto.n_r, n_l=proto.n_l, seed=task.seed)
+    method = MethodConfig(
+        prior="impartial", n_r=proto.n_r, n_l=proto.n_l, seed=task.seed, estimator="paper"
+    )
     summary = process_log(log, method, summary=log.with_suffix(".summary.json"))
     out.seconds["process"] = time.perf_counter() - tick
 
@@ -97,6 +100,11 @@ def run_one(task: RunTask) -> RunOutput:
             rng=np.random.default_rng(seeds[len(proto.priors) + j]),
         )
     out.seconds["methods"] = time.perf_counter() - tick
+    tick = time.perf_counter()
+    if proto.joint:
+        rng = np.random.default_rng(np.random.SeedSequence(task.seed).spawn(1)[0])
+        out.rows += joint_rows(observations, ctx, n_r=proto.n_r, n_l=proto.n_l, rng=rng)
+    out.seconds["joint"] = time.perf_counter() - tick
     tick = time.perf_counter()
     if proto.batch_ls:
         out.rows += batch_ls_rows(observations, ctx)

@@ -53,7 +53,8 @@ def test_tiny_paper_experiment_end_to_end(tmp_path: Path) -> None:
         summary = json.loads(log.with_suffix(".summary.json").read_text())
         assert len(summary["movements"]) == 4
     methods = {r.method for r in res.rows}
-    assert methods == {"impartial", "gaussian", "mixture", "batch_ls", "crb"}
+    assert methods == {"impartial", "gaussian", "mixture", "joint", "batch_ls", "crb"}
+    assert len([r for r in res.rows if r.method == "joint"]) == 3 * 4 * 2
     # shape: 3 runs x 4 movements x 2 scored landmarks per method (n_l sweep: 3 movements)
     main = [r for r in res.rows if r.method == "impartial" and r.n_l == 100]
     assert len(main) == 3 * 4 * 2
@@ -211,7 +212,7 @@ def test_tiny_sweep_end_to_end_is_quiet(tmp_path: Path) -> None:
         assert len(rows) == 2 * 4 * 2  # runs x movements x scored landmarks
         last = [r for r in rows if r.movement == 4]
         assert all(math.isfinite(r.error_cm) and 0 <= r.error_cm < 30 for r in last)
-    assert {r.method for r in res.rows} == {"impartial", "mixture", "batch_ls", "crb"}
+    assert {r.method for r in res.rows} == {"impartial", "mixture", "joint", "batch_ls", "crb"}
     assert (out / "sweep_n_l.png").stat().st_size > 0
     report = (out / "report.md").read_text()
     tables = report.split("## n_l=")[1:]
@@ -245,3 +246,20 @@ def test_prior_names_agree_with_the_estimator() -> None:
     from replay.records import PRIORS as RECORD_PRIORS
 
     assert PRIORS == PRIOR_CHOICES == RECORD_PRIORS == get_args(PriorName)
+
+
+def test_tiny_arenas_experiment_reports_the_goals(tmp_path: Path) -> None:
+    out = tmp_path / "arenas"
+    args = ["experiment", "arenas", "--out", str(out), "--runs", "2", "--movements", "6"]
+    args += ["--seed", "10"]
+    result = CliRunner().invoke(cli, [*args, "--workers", "1", "--quiet"])
+    assert result.exit_code == 0, result.output
+    goals = json.loads((out / "goals.json").read_text())
+    assert goals["runs"] == 2 and goals["landmarks_scored"] >= 4
+    assert set(goals["mean_error_cm"]) == {"joint", "batch_ls", "paper", "crb"}
+    assert goals["missing_where_ls_places"] == 0
+    scenarios = sorted((out / "runs" / "arenas").glob("*.scenario.json"))
+    cams = [json.loads(p.read_text())["camera"]["model"] for p in scenarios]
+    assert cams == ["unwrapped", "omni"]  # both camera models, alternated
+    refs = [json.loads(p.read_text())["reference"] for p in scenarios]
+    assert refs != [["L1", "L2"], ["L1", "L2"]]  # other reference pairs than the paper's

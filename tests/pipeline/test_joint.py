@@ -1,0 +1,274 @@
+"""The joint estimator (pipeline/joint): accuracy against batch least squares, calibration of the
+80% regions, the robust loss, the divergence fallback, single keyframes and resection."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from data_schemas.errors import EstimationError
+from pipeline.batch_ls import batch_least_squares
+from pipeline.estimators import make_estimator
+from pipeline.joint.estimator import JointSlam
+from pipeline.joint.geometry import Sightings, intersect_rays, resect
+from pipeline.joint.noise import estimate_noise
+from pipeline.slam import MovementObservation
+from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, random_arena, simulate_bearings
+
+EPS = math.radians(3.0)
+
+
+def _slam(run: SimulatedRun, reference: tuple[str, str], seed: int, **kw: object) -> JointSlam:
+    """A joint estimator for the run's landmarks (a small initializer: it only seeds)."""
+    return JointSlam(
+        list(run.landmarks_world),
+        reference,
+        vision_error_rad=EPS,
+        rng=np.random.default_rng(seed),
+        n_r=30,
+        n_l=100,
+        **kw,  # type: ignore[arg-type]
+    )
+
+
+def _joint(run: SimulatedRun, reference: tuple[str, str], seed: int, **kw: object) -> JointSlam:
+    slam = _slam(run, reference, seed, **kw)
+    for obs in run.observations:
+        slam.process_movement(obs)
+    return slam
+
+
+def _varied_run(seed: int) -> tuple[SimulatedRun, tuple[str, str], float]:
+    """A random arena (up to 3 x 2 m, 4-8 landmarks, noise 0-1.5 deg), 10 movements."""
+    rng = np.random.default_rng(seed)
+    arena = random_arena(rng)
+    frac = max(math.radians(arena.bearing_noise_deg) / EPS, 1e-3)
+    run = simulate_bearings(
+        10,
+        rng,
+        eps_rad=EPS,
+        sigma_frac=frac,
+        landmarks_world=arena.landmarks_world,
+        arena_m=arena.size_m,
+        move_m=arena.move_m,
+    )
+    l1, l2 = (np.array(arena.landmarks_world[r]) for r in arena.reference)
+    return run, arena.reference, float(np.hypot(*(l2 - l1)))
+
+
+def _score(seeds: range) -> dict[str, float]:
+    joint_cm, ls_cm, inside, worse, missing = [], [], [], 0, 0
+    for seed in seeds:
+        run, ref, unit_m = _varied_run(seed)
+        truth = run.truth_fl(ref)
+        slam = _joint(run, ref, seed)
+        ls = batch_least_squares(run.observations, list(run.landmarks_world), ref)
+        for name, p in ls.items():
+            est = slam.estimates.get(name)
+            if est is None:
+                missing += 1
+                continue
+            j = 100 * unit_m * float(np.hypot(*(est.mean_fl - truth[name])))
+            b = 100 * unit_m * float(np.hypot(*(p - truth[name])))
+            joint_cm.append(j)
+            ls_cm.append(b)
+            inside.append(est.contains(truth[name]))
+            worse += j > 5.0 and j > 3.0 * b
+    return {
+        "ratio": float(np.mean(joint_cm) / np.mean(ls_cm)),
+        "coverage": float(np.mean(inside)),
+        "worse": worse,
+        "missing": missing,
+        "n": len(inside),
+    }
+
+
+def test_varied_arenas_match_batch_least_squares_and_are_calibrated() -> None:
+    # 15 random arenas (fixed seeds): other reference pairs, sizes, landmark counts, noise.
+    # Where least squares converges, the joint map is the same optimum plus the shared
+    # observation points (measured: 0.95-1.03x least squares on sets of 15-40 such arenas);
+    # the 0.8x goal, which counts the arenas where least squares goes wrong, is asserted over
+    # 100 arenas in the slow test and measured by `bslam experiment arenas`.
+    s = _score(range(15))
+    assert s["n"] >= 50
+    assert s["missing"] == 0  # every landmark least squares places is mapped
+    assert s["worse"] == 0  # none more than 5 cm and 3x worse than least squares
+    assert s["ratio"] <= 1.05
+    assert 0.70 <= s["coverage"] <= 0.90  # 80% regions; +-0.1 is 2 binomial std at n ~ 50
+
+
+@pytest.mark.slow
+def test_varied_arenas_goals_over_100_runs() -> None:
+    s = _score(range(100, 200))
+    assert s["missing"] == 0 and s["worse"] == 0
+    assert s["ratio"] <= 0.8
+    assert 0.75 <= s["coverage"] <= 0.85
+
+
+def test_paper_arena_is_at_least_as_good_as_least_squares() -> None:
+    joint, ls = [], []
+    for seed in range(8):
+        run = simulate_bearings(10, np.random.default_rng(seed), eps_rad=EPS)
+        truth = run.truth_fl()
+        slam = _joint(run, PAPER_REFERENCE, seed)
+        fit = batch_least_squares(run.observations, list(run.landmarks_world), PAPER_REFERENCE)
+        for name in ("L3", "L4"):
+            joint.append(float(np.hypot(*(slam.estimates[name].mean_fl - truth[name]))))
+            ls.append(float(np.hypot(*(fit[name] - truth[name]))))
+    assert np.mean(joint) <= np.mean(ls)
+    assert slam.noise is not None
+    # the simulated noise: std eps/2 truncated at eps (1.32 deg); estimated from the residuals
+    assert math.degrees(slam.noise.sigma_rad) == pytest.approx(1.32, abs=0.4)
+
+
+def _edit(run: SimulatedRun, movement: int, name: str, delta_rad: float | None) -> SimulatedRun:
+    """``name``'s O2 bearing at ``movement`` moved by ``delta_rad`` (None: deleted)."""
+    obs = list(run.observations)
+    o = obs[movement]
+    b2 = dict(o.bearings_o2_rad)
+    if delta_rad is None:
+        del b2[name]
+    else:
+        b2[name] += delta_rad
+    obs[movement] = replace(o, bearings_o2_rad=b2)
+    return replace(run, observations=obs)
+
+
+@pytest.mark.parametrize("seed", [3, 5, 8])
+def test_one_wrong_bearing_does_not_drag_the_map(seed: int) -> None:
+    # a wrong detection 25 deg off: the map must be the one without that bearing
+    run = simulate_bearings(10, np.random.default_rng(seed), eps_rad=EPS)
+    wrong = _edit(run, 4, "L3", math.radians(25.0))
+    without = _edit(run, 4, "L3", None)
+    robust = _joint(wrong, PAPER_REFERENCE, 0)
+    ideal = _joint(without, PAPER_REFERENCE, 0)
+    for name in ("L3", "L4"):
+        drag = float(np.hypot(*(robust.estimates[name].mean_fl - ideal.estimates[name].mean_fl)))
+        assert drag < 2e-3, name  # 0.6 mm at |L1 L2| = 0.3 m
+    assert robust.noise is not None and robust.noise.n_outliers >= 1
+    # plain least squares on the same bearings is pulled away
+    names = list(run.landmarks_world)
+    ls_wrong = batch_least_squares(wrong.observations, names, PAPER_REFERENCE)
+    ls_without = batch_least_squares(without.observations, names, PAPER_REFERENCE)
+    assert np.hypot(*(ls_wrong["L3"] - ls_without["L3"])) > 0.01
+
+
+def test_divergence_falls_back_to_the_particles() -> None:
+    # with a zero tolerance every movement counts as diverged: the map is rebuilt each time
+    # from the initializer's particles, and must still come out right
+    run = simulate_bearings(10, np.random.default_rng(5), eps_rad=EPS)
+    truth = run.truth_fl()
+    slam = _slam(run, PAPER_REFERENCE, 5, divergence_rms_rad=0.0)
+    results = [slam.process_movement(obs) for obs in run.observations]
+    placed = [r for r in results if r.placement]
+    assert placed and all(r.divergence.startswith("robust residual RMS") for r in placed)
+    assert slam.reinitializations == len(placed)
+    reference = _joint(run, PAPER_REFERENCE, 5)
+    for name in ("L3", "L4"):
+        est = slam.estimates[name]
+        assert np.hypot(*(est.mean_fl - truth[name])) < 0.1
+        # the same optimum as the incremental map, within a tenth of its std
+        std = math.sqrt(float(np.linalg.eigvalsh(est.cov_fl)[-1]))
+        assert np.hypot(*(est.mean_fl - reference.estimates[name].mean_fl)) < 0.1 * std
+
+
+def test_landmark_jump_is_detected() -> None:
+    run = simulate_bearings(10, np.random.default_rng(5), eps_rad=EPS)
+    slam = _joint(run, PAPER_REFERENCE, 5)
+    before = slam.estimates
+    assert slam._jumped(before) == ""
+    moved = {"L3": replace(before["L3"], mean_fl=np.add(before["L3"].mean_fl, [1.0, 0.0]))}
+    assert slam._jumped(moved).startswith("L3 jumped 1.000 FL")
+
+
+def test_single_keyframes_and_degenerate_reference_still_count() -> None:
+    run = simulate_bearings(10, np.random.default_rng(11), eps_rad=EPS)
+    obs = list(run.observations)
+    # movement 3: L1 hidden at O2 (the paper must skip it); L4 only ever seen at O1
+    o3 = obs[3]
+    obs[3] = replace(o3, bearings_o2_rad={k: v for k, v in o3.bearings_o2_rad.items() if k != "L1"})
+    obs = [
+        replace(o, bearings_o2_rad={k: v for k, v in o.bearings_o2_rad.items() if k != "L4"})
+        for o in obs
+    ]
+    slam = _slam(run, PAPER_REFERENCE, 0)
+    results = [slam.process_movement(o) for o in obs]
+    assert results[3].status == "ok" and results[3].placement == "resection"
+    assert "L4" in slam.estimates and "L4" not in slam.paper.estimates
+    truth = run.truth_fl()
+    assert np.hypot(*(slam.estimates["L4"].mean_fl - truth["L4"])) < 0.1
+    assert slam.used_movements == list(range(10))
+
+
+def test_unplaceable_movement_waits_and_is_placed_later() -> None:
+    run = simulate_bearings(10, np.random.default_rng(1), eps_rad=EPS)
+    obs = list(run.observations)
+    # L1 hidden at movement 0's O2: no frame to start the map from, nothing mapped to resect on
+    o0 = obs[0]
+    obs[0] = replace(o0, bearings_o2_rad={k: v for k, v in o0.bearings_o2_rad.items() if k != "L1"})
+    slam = _slam(run, PAPER_REFERENCE, 0)
+    first = slam.process_movement(obs[0])
+    assert first.status.startswith("skipped: no movement sees the reference pair")
+    assert slam.waiting_movements == [0] and slam.estimates == {}
+    second = slam.process_movement(obs[1])  # starts the map; movement 0 is resected on it
+    assert second.status == "ok" and second.also_placed == [0]
+    assert slam.waiting_movements == [] and slam.used_movements == [0, 1]
+
+
+def test_factory_and_bad_arguments() -> None:
+    args = (["A", "B", "C"], ("A", "B"))
+    paper = make_estimator("paper", *args, vision_error_rad=EPS, rng=np.random.default_rng(0))
+    assert type(paper).__name__ == "BearingSlam"
+    joint = make_estimator("joint", *args, vision_error_rad=EPS, rng=np.random.default_rng(0))
+    assert isinstance(joint, JointSlam)
+    with pytest.raises(EstimationError, match="unknown estimator 'kalman'"):
+        make_estimator("kalman", *args, vision_error_rad=EPS, rng=np.random.default_rng(0))
+    with pytest.raises(EstimationError, match="turn prior std must be > 0"):
+        JointSlam(
+            *args, vision_error_rad=EPS, rng=np.random.default_rng(0), turn_prior_sigma_rad=0.0
+        )
+    obs = MovementObservation(0, {"A": 1.0, "B": 0.5}, {"A": 1.2, "B": 0.8})
+    joint.process_movement(obs)
+    with pytest.raises(EstimationError, match="movement 0 was already processed"):
+        joint.process_movement(obs)
+
+
+def test_resection_recovers_a_movement_from_known_points() -> None:
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-2, 2, (6, 2))
+    o1, h, d = np.array([0.3, -0.2]), 0.7, 0.8
+    o2 = o1 + d * np.array([math.cos(h), math.sin(h)])
+    ends = np.array([0] * 6 + [1] * 6)
+    origins = np.where(ends[:, None] == 0, o1, o2)
+    pp = np.vstack([pts, pts])
+    b = np.arctan2(pp[:, 1] - origins[:, 1], pp[:, 0] - origins[:, 0]) - h
+    found = resect(Sightings(pp, ends, b), guesses=[])
+    assert found is not None
+    assert found.pose.o1_fl == pytest.approx(o1, abs=1e-6)
+    assert found.pose.heading_rad == pytest.approx(h, abs=1e-6)
+    assert found.pose.length_fl == pytest.approx(d, abs=1e-6)
+    assert np.isfinite(found.position_std_fl)
+
+
+def test_ray_intersection_ignores_a_wrong_ray() -> None:
+    p = np.array([1.0, 2.0])
+    origins = np.array([[0.0, 0.0], [1.5, 0.0], [3.0, 0.5], [-1.0, 1.0]])
+    dirs = np.arctan2(p[1] - origins[:, 1], p[0] - origins[:, 0])
+    dirs[3] += 0.5  # a wrong detection
+    fix = intersect_rays(origins, dirs, math.radians(6.0))
+    assert fix is not None
+    assert fix.point_fl == pytest.approx(p, abs=1e-9)
+    assert intersect_rays(origins[:1], dirs[:1], 0.1) is None
+
+
+def test_noise_estimate_leaves_out_wrong_detections_and_counts_freedom() -> None:
+    rng = np.random.default_rng(0)
+    r = rng.normal(0.0, 0.01, 400)
+    r[:3] = 0.5
+    est = estimate_noise(r, n_params=40, sigma0_rad=0.02)
+    assert est.n_outliers == 3 and est.dof == 397 - 40
+    assert est.sigma_rad == pytest.approx(0.01 * math.sqrt(397 / 357), rel=0.1)
+    assert estimate_noise(np.zeros(0), 4, 0.02).sigma_rad == 0.02
