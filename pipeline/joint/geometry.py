@@ -135,7 +135,7 @@ def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[n
         c = float(rc @ rc)
         if c < cost:
             x, r, lam = cand, rc, lam * 0.3
-            done = cost - c < 1e-12 * cost
+            done = cost - c < 1e-8 * cost
             cost = c
             if done:
                 break
@@ -208,7 +208,7 @@ def resect(
     cand[..., 2] = h[:, None]
     cand[..., 3] = np.log(LENGTHS_FL)[None, :]
     cost = (s.residuals(cand.reshape(-1, 4)) ** 2).sum(axis=1)
-    order = np.argsort(cost)[: 2 if o1_known_fl is not None else 4]
+    order = np.argsort(cost)[: 1 if o1_known_fl is not None else 4]
     seeds = [cand.reshape(-1, 4)[i] for i in order]
     seeds += [
         np.array([g.o1_fl[0], g.o1_fl[1], g.heading_rad, math.log(g.length_fl)]) for g in guesses
