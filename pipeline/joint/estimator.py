@@ -588,10 +588,15 @@ class JointSlam:
         used = self._bearings()
         if not used:
             return used, np.zeros(0)
-        poses = [self._values.atPose2(g.pose_key(b.movement, b.end)) for b in used]
-        o = np.array([(p.x(), p.y()) for p in poses])
-        h = np.array([p.theta() for p in poses])
-        pts = np.array([self._point(b.landmark) for b in used])
+        keyframes: dict[tuple[int, int], tuple[float, float, float]] = {}
+        for k in self._placed:
+            for end in (0, 1):
+                p = self._values.atPose2(g.pose_key(k, end))
+                keyframes[k, end] = (p.x(), p.y(), p.theta())
+        points = {n: self._point(n) for n in self._in_graph}
+        xyh = np.array([keyframes[b.movement, b.end] for b in used])
+        o, h = xyh[:, :2], xyh[:, 2]
+        pts = np.array([points[b.landmark] for b in used])
         meas = np.array([b.bearing_rad for b in used])
         r = np.asarray(wrap_rad(meas - predicted_bearings(o, h, pts)), np.float64)
         return used, r

@@ -78,7 +78,7 @@ class Sightings:
     def residuals(self, params: NDArray[np.float64]) -> NDArray[np.float64]:
         """Wrapped bearing errors (..., k) for movement parameters (..., 4) = x, y, h, log d."""
         x, y, h, logd = (params[..., i, None] for i in range(4))
-        d = np.exp(np.clip(logd, -30.0, 30.0)) * self.end
+        d = _length(logd) * self.end
         ox = x + d * np.cos(h)
         oy = y + d * np.sin(h)
         pred = np.arctan2(self.points_fl[:, 1] - oy, self.points_fl[:, 0] - ox) - h
@@ -88,6 +88,17 @@ class Sightings:
     def subset(self, keep: NDArray[np.bool_]) -> Sightings:
         """The sightings selected by a mask (k,)."""
         return Sightings(self.points_fl[keep], self.end[keep], self.bearings_rad[keep])
+
+
+#: Bounds on a movement's log length in the solver (FL units): e^30 is far beyond any arena, and
+#: an unbounded Levenberg-Marquardt step must not overflow ``exp``.
+LOG_LENGTH_BOUND = 30.0
+
+
+def _length(log_length: NDArray[np.float64] | float) -> NDArray[np.float64]:
+    """A movement's length from its log length, bounded to +-:data:`LOG_LENGTH_BOUND`."""
+    out: NDArray[np.float64] = np.exp(np.clip(log_length, -LOG_LENGTH_BOUND, LOG_LENGTH_BOUND))
+    return out
 
 
 def _heading_from(s: Sightings, o1_fl: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -101,7 +112,7 @@ def _heading_from(s: Sightings, o1_fl: NDArray[np.float64]) -> NDArray[np.float6
 
 def _jacobian(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
     """d(predicted bearing)/d(x, y, h, log d) (k, 4) at parameters ``x`` (4,)."""
-    h, d = x[2], math.exp(x[3]) * s.end
+    h, d = x[2], float(_length(x[3])) * s.end
     c, sn = math.cos(h), math.sin(h)
     dx = s.points_fl[:, 0] - (x[0] + d * c)
     dy = s.points_fl[:, 1] - (x[1] + d * sn)
@@ -135,7 +146,7 @@ def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[n
         c = float(rc @ rc)
         if c < cost:
             x, r, lam = cand, rc, lam * 0.3
-            done = cost - c < 1e-12 * cost
+            done = cost - c < 1e-8 * cost
             cost = c
             if done:
                 break
@@ -208,7 +219,7 @@ def resect(
     cand[..., 2] = h[:, None]
     cand[..., 3] = np.log(LENGTHS_FL)[None, :]
     cost = (s.residuals(cand.reshape(-1, 4)) ** 2).sum(axis=1)
-    order = np.argsort(cost)[: 2 if o1_known_fl is not None else 4]
+    order = np.argsort(cost)[: 1 if o1_known_fl is not None else 4]
     seeds = [cand.reshape(-1, 4)[i] for i in order]
     seeds += [
         np.array([g.o1_fl[0], g.o1_fl[1], g.heading_rad, math.log(g.length_fl)]) for g in guesses
@@ -241,7 +252,7 @@ def resect(
         pos = logd = math.inf
     if not (math.isfinite(pos) and math.isfinite(logd)) or np.linalg.cond(info) > 1e14:
         pos = logd = math.inf
-    pose = MovementPose(x[:2].copy(), float(wrap_rad(float(x[2]))), float(math.exp(x[3])))
+    pose = MovementPose(x[:2].copy(), float(wrap_rad(float(x[2]))), float(_length(x[3])))
     return Resection(pose, r, keep, pos, logd)
 
 
