@@ -169,6 +169,8 @@ class MovementRecord:
         Joint estimator: bearing noise std estimated from every residual of the map.
     divergence : str
         Joint estimator: why the map was re-initialized from the particles, if it was.
+    also_placed : tuple of int
+        Joint estimator: earlier movements that had to wait and entered the map with this one.
     """
 
     index: int
@@ -191,6 +193,7 @@ class MovementRecord:
     residuals_rad: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     bearing_noise_rad: float | None = None
     divergence: str = ""
+    also_placed: tuple[int, ...] = ()
 
     @property
     def ok(self) -> bool:
