@@ -39,4 +39,5 @@ def joint_fields(result: MovementResult) -> dict[str, Any]:
         "residuals_rad": dict(result.residuals_rad),
         "bearing_noise_rad": None if result.noise is None else result.noise.sigma_rad,
         "divergence": result.divergence,
+        "also_placed": tuple(result.also_placed),
     }

@@ -173,6 +173,8 @@ class MovementRecord:
     ambiguous_landmarks : dict name -> reason
         Landmarks whose class (colour or band code) other landmarks share, so that a keyframe
         detection could not say which one it saw: left out of this movement, never guessed.
+    also_placed : tuple of int
+        Joint estimator: earlier movements that had to wait and entered the map with this one.
     """
 
     index: int
@@ -196,6 +198,7 @@ class MovementRecord:
     bearing_noise_rad: float | None = None
     divergence: str = ""
     ambiguous_landmarks: Mapping[str, str] = field(default_factory=dict)
+    also_placed: tuple[int, ...] = ()
 
     @property
     def ok(self) -> bool:

@@ -61,6 +61,8 @@ def _joint_fields(record: MovementRecord) -> dict[str, Any]:
         out["bearing_noise_rad"] = record.bearing_noise_rad
     if record.divergence:
         out["divergence"] = record.divergence
+    if record.also_placed:
+        out["also_placed"] = list(record.also_placed)
     if record.residuals_rad:
         rows = []
         for name, (r1, r2) in record.residuals_rad.items():

@@ -115,6 +115,8 @@ class SummarySink:
         if record.bearing_noise_rad is not None:
             self._noise_rad = record.bearing_noise_rad
             entry["bearing_noise_deg"] = round(math.degrees(record.bearing_noise_rad), 6)
+        if record.also_placed:
+            entry["also_placed"] = list(record.also_placed)
         if record.divergence:
             entry["divergence"] = record.divergence
             self._reinitializations += 1

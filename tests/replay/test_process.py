@@ -284,3 +284,24 @@ def test_job_is_picklable() -> None:
 
     job = LogJob(Path("a.mcap"), None, None, MethodConfig(prior="mixture"))
     assert pickle.loads(pickle.dumps(job)) == job
+
+
+def test_joint_places_a_waiting_movement_later(tmp_path: Path) -> None:
+    # L1 hidden at the end of movement 0: no frame to start the map from; movement 1 starts it
+    # and movement 0 is placed then (summary and derived log say so)
+    log = write_log(
+        tmp_path / "wait.mcap", hidden=lambda i, ph: ("L1",) if (i, ph) == (0, "end") else ()
+    )
+    out = tmp_path / "wait.derived.mcap"
+    doc = process_log(log, MethodConfig(n_r=20, n_l=40), out=out)
+    moves = doc["movements"]
+    assert moves[0]["status"].startswith("skipped: no movement sees the reference pair")
+    assert moves[1]["status"] == "ok" and moves[1]["also_placed"] == [0]
+    with out.open("rb") as f:
+        estimates = [
+            json.loads(m.data)
+            for _, c, m in make_reader(f).iter_messages()
+            if c.topic == "/pipeline/estimate"
+        ]
+    assert estimates[1]["also_placed"] == [0] and "also_placed" not in estimates[0]
+    assert all(e["estimator"] == "joint" for e in estimates)

@@ -179,3 +179,22 @@ def test_recording_id_is_the_session_id(tmp_path: Path) -> None:
             assert entry.recording_id == reader.session().session_id
         ids.append(entry.recording_id)
     assert ids[0] != ids[1]
+
+
+def test_joint_residuals_noise_and_estimator_are_shown(
+    replayed: tuple[Path, dict[str, Any]],
+) -> None:
+    rrd, doc = replayed
+    rows = _read(rrd)
+    noise = [
+        r["Scalars:scalars"][0] for r in rows["/residuals/noise_deg"] if r.get("Scalars:scalars")
+    ]
+    assert noise[-1] == pytest.approx(doc["bearing_noise_deg"], abs=1e-4)
+    rms = [r["Scalars:scalars"][0] for r in rows["/residuals/rms_deg"] if r.get("Scalars:scalars")]
+    last = [
+        x for pair in doc["movements"][-1]["residuals_deg"].values() for x in pair if x is not None
+    ]
+    assert rms[-1] == pytest.approx(math.sqrt(sum(x * x for x in last) / len(last)), abs=1e-4)
+    texts = " ".join(str(t) for r in rows["/log"] for t in (r.get("TextLog:text") or []))
+    assert "map made by the joint estimator" in texts
+    assert "placed by reference pair" in texts
