@@ -8,6 +8,14 @@ that raises them, always deriving from one of the classes here.
 
 from __future__ import annotations
 
+import os
+import shlex
+
+
+def recover_hint(log: str | os.PathLike[str]) -> str:
+    """``run `bslam recover LOG FIXED.mcap``` with LOG quoted for a shell (one definition)."""
+    return f"run `{shlex.join(['bslam', 'recover', os.fspath(log), 'FIXED.mcap'])}`"
+
 
 class BslamError(Exception):
     """Root of every error bearing-slam reports to a user (message = one clear line)."""

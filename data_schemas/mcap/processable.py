@@ -32,6 +32,7 @@ from data_schemas.errors import (
     MissingMetadataError,
     UnfinishedLogError,
     UnknownSchemaError,
+    recover_hint,
 )
 from data_schemas.mcap.index import CorruptChunksError, DamagedLogError, LogIndex
 from data_schemas.mcap.read import LogMessage, corrupt_log_line, corruption
@@ -223,7 +224,7 @@ class ProcessableLog:
         if not scan.finished and not corrupt:
             raise UnfinishedLogError(
                 f"{self.name} is unfinished (the recording was interrupted): {count} "
-                f"messages are readable; run `bslam recover {self.path} FIXED.mcap`"
+                f"messages are readable; {recover_hint(self.path)}"
             )
         self.skipped = [d for d in corrupt if d.loses_data]
         return scan.schemas, scan.channels, metadata
@@ -317,10 +318,7 @@ class ProcessableLog:
 
     @property
     def _advice(self) -> str:
-        return (
-            f"run `bslam recover {self.path} FIXED.mcap`, or pass --skip-corrupt to process "
-            "the rest"
-        )
+        return f"{recover_hint(self.path)}, or pass --skip-corrupt to process the rest"
 
     def close(self) -> None:
         """Close the file."""

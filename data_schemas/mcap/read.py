@@ -19,7 +19,12 @@ from typing import IO, Any
 from mcap.records import Channel, Message, Metadata, Schema
 
 from data_schemas.codec import decode
-from data_schemas.errors import CorruptLogError, MissingMetadataError, UnfinishedLogError
+from data_schemas.errors import (
+    CorruptLogError,
+    MissingMetadataError,
+    UnfinishedLogError,
+    recover_hint,
+)
 from data_schemas.mcap.scan import Damage, LogScan
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
@@ -132,13 +137,11 @@ class LogReader:
             self.finished = scan.finished and not scan.damage
         corrupt = corruption(self.damage)
         if corrupt and not allow_corrupt:
-            raise CorruptLogError(
-                corrupt_log_line(self.name, corrupt, f"run `bslam recover {self.name} FIXED.mcap`")
-            )
+            raise CorruptLogError(corrupt_log_line(self.name, corrupt, recover_hint(self.name)))
         if not scan.finished and not allow_unfinished:
             raise UnfinishedLogError(
                 f"{self.name} is unfinished (the recording was interrupted): {count} "
-                f"messages are readable; run `bslam recover {self.name} FIXED.mcap`"
+                f"messages are readable; {recover_hint(self.name)}"
             )
 
     def _scan(self) -> LogScan:

@@ -41,7 +41,7 @@ from typing import IO, Any, Protocol
 import pybase64
 
 from data_schemas.codec import validate
-from data_schemas.errors import DiskFullError, LogError, SchemaError
+from data_schemas.errors import DiskFullError, LogError, SchemaError, recover_hint
 from data_schemas.mcap.chunks import Bytes, McapChunkWriter
 from data_schemas.registry import (
     IMAGE_SCHEMAS,
@@ -354,7 +354,7 @@ class LogWriter:
             error: LogError = DiskFullError(
                 f"disk full while writing {self.name} ({exc.strerror}): "
                 f"{self._committed_messages} messages kept up to the last complete chunk; "
-                f"free space, then run `bslam recover {self.name} FIXED.mcap`"
+                f"free space, then {recover_hint(self.name)}"
             )
         else:
             error = LogError(f"cannot write log {self.name}: {exc.strerror or exc}")

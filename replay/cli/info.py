@@ -14,7 +14,7 @@ def info(log: str) -> None:
     corrupt one is summarised as far as it reads, then the command exits 1 and suggests
     `bslam recover`.
     """
-    from data_schemas.errors import CorruptLogError, UnfinishedLogError
+    from data_schemas.errors import CorruptLogError, UnfinishedLogError, recover_hint
     from data_schemas.mcap.info import log_summary, summary_lines
     from data_schemas.mcap.read import corrupt_log_line, corruption
 
@@ -22,14 +22,9 @@ def info(log: str) -> None:
     for line in summary_lines(s):
         click.echo(line)
     if s.state == "corrupt":
-        raise CorruptLogError(
-            corrupt_log_line(
-                s.name, corruption(s.damage), f"run `bslam recover {s.name} FIXED.mcap`"
-            )
-        )
+        raise CorruptLogError(corrupt_log_line(s.name, corruption(s.damage), recover_hint(s.name)))
     if s.state == "unfinished":
         raise UnfinishedLogError(
             f"{s.name} is unfinished: {s.message_count} messages are readable "
-            f"({s.trailing_bytes} bytes of an incomplete chunk follow); "
-            f"run `bslam recover {s.name} FIXED.mcap`"
+            f"({s.trailing_bytes} bytes of an incomplete chunk follow); {recover_hint(s.name)}"
         )

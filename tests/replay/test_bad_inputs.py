@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
 import pytest
@@ -89,6 +90,17 @@ def test_bad_log_is_one_line_exit_1(tmp_path: Path, kind: str, command: str) -> 
     assert len(lines) == 1, result.output
     assert lines[0].startswith("Error: ")
     assert EXPECTED[kind].lower() in lines[0].lower()
+
+
+@pytest.mark.parametrize("command", ["process", "info"])
+def test_recover_hint_is_a_command_a_shell_can_run(tmp_path: Path, command: str) -> None:
+    folder = tmp_path / "my logs"
+    folder.mkdir()
+    log = write_log(folder / "cut $HOME.mcap", finish=False)
+    result = CliRunner().invoke(cli, [command, str(log)])
+    assert result.exit_code == 1, result.output
+    hint = result.output.split("`")[-2]  # the one back-quoted command of the error line
+    assert shlex.split(hint) == ["bslam", "recover", str(log), "FIXED.mcap"]
 
 
 def test_bad_option_is_usage_error(small_log: Path) -> None:
