@@ -98,6 +98,7 @@ def test_killed_recording_ends_the_follower_with_a_clear_line(tmp_path: Path) ->
     assert doc["movements"], "the chunks written before the kill were processed"
 
 
+@pytest.mark.slow  # real processes in real time: CI runs it with -m slow
 def test_killing_the_live_follower_does_not_disturb_the_recording(tmp_path: Path) -> None:
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
@@ -119,6 +120,7 @@ def test_killing_the_live_follower_does_not_disturb_the_recording(tmp_path: Path
     assert len(docs[0]["movements"]) == 10
 
 
+@pytest.mark.slow  # real processes in real time: CI runs it with -m slow
 def test_live_terminal_view_follows_to_the_end(tmp_path: Path) -> None:
     out = tmp_path / "view.mcap"
     live = _simulate(out, "--speed", "12", "--live")
@@ -145,6 +147,7 @@ def _entities(rrd: Path) -> set[str]:
     return {chunk.entity_path for chunk in rr.chunk.RrdReader(rrd).stream()}
 
 
+@pytest.mark.slow  # real processes in real time: CI runs it with -m slow
 def test_live_rerun_recording_has_the_offline_entities(tmp_path: Path) -> None:
     out, live_rrd, offline_rrd = tmp_path / "s.mcap", tmp_path / "live.rrd", tmp_path / "off.rrd"
     live = _simulate(out, "--speed", "20", "--live", "--save", str(live_rrd))
