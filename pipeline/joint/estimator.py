@@ -410,6 +410,22 @@ class JointSlam:
             out[name] = LandmarkEstimate(self._point(name), 0.5 * (cov + cov.T))
         self._estimates = out
 
+    def add_history(self, name: str, bearings: Sequence[tuple[int, int, float]]) -> None:
+        """Bearings of ``name`` from movements already in the graph, known only now.
+
+        An association step names a landmark of a shared class once it is confirmed; its
+        earlier bearings ``(movement, end, bearing_rad)`` wait with the landmark's own until it
+        enters the graph (movements not in the graph are ignored).
+        """
+        if name not in self._lm_index or name in self._in_graph:
+            return
+        placed = {m.index for m in self._moves}
+        for movement, end, b in bearings:
+            if movement in placed and math.isfinite(b):
+                bearing = g.Bearing(movement, end, name, float(b))
+                self._bearings.append(bearing)
+                self._pending.setdefault(name, []).append(bearing)
+
     # ------------------------------------------------------------------ one movement
     def process_movement(self, obs: MovementObservation) -> JointMovementResult:
         """Initialize with the paper's filter, place the movement, add its bearings, update."""
