@@ -1,5 +1,6 @@
-"""Landmarks that look alike: never mapped from a guess, reported per movement and in the summary;
-coded landmarks go through the whole pipeline (real simulator, ``bslam simulate`` / ``process``)."""
+"""Landmarks that look alike: named by association (``blue#1``), what stays open reported per
+movement and in the summary; coded landmarks go through the whole pipeline (real simulator,
+``bslam simulate`` / ``process``)."""
 
 from __future__ import annotations
 
@@ -40,20 +41,35 @@ def alike(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], str
     return json.loads(summary.read_text()), result.output
 
 
-def test_alike_landmarks_are_reported_not_guessed(alike: tuple[dict[str, Any], str]) -> None:
+def test_alike_landmarks_are_named_by_association(alike: tuple[dict[str, Any], str]) -> None:
     doc, output = alike
     assert doc["ambiguous_classes"] == {"blue": ["L3", "L4"]}
+    # catalog names of a shared class are never used: the map says blue#1, blue#2
     assert "L3" not in doc["landmarks"] and "L4" not in doc["landmarks"]
-    flagged = 0
+    assoc = doc["association"]
+    assert assoc["named"] == {"blue": ["blue#1", "blue#2"]}
+    assert assoc["catalog_count"] == {"blue": 2}
+    matched = assoc["matched_truth"]
+    assert sorted(matched[n] for n in ("blue#1", "blue#2")) == ["L3", "L4"]
+    errors = [doc["error_m"][n] for n in ("blue#1", "blue#2")]
+    assert max(errors) <= 0.10 and sum(errors) / 2 <= 0.03
     for move in doc["movements"]:
-        assert "L3" not in move["landmarks"] and "L4" not in move["landmarks"]
-        assert move["bearings_deg"]["L3"] == [None, None] == move["bearings_deg"]["L4"]
-        for name, reason in move.get("ambiguous_landmarks", {}).items():
-            assert name in ("L3", "L4") and "shared with" in reason and "blob" in reason
-            flagged += 1
-    assert flagged >= len(doc["movements"])  # seen in most keyframes, flagged every time
-    assert "not mapped, alike with no association: L3 L4 (blue)" in output
-    assert "L3, L4 not used (landmarks that look alike" in output
+        assert "L3" not in move["bearings_deg"] and "L4" not in move["bearings_deg"]
+        assert set(move["landmarks"]) <= {"L5", "blue#1", "blue#2"}
+    assert "alike landmarks named: blue 2/2" in output
+
+
+def test_what_association_leaves_open_is_reported(alike: tuple[dict[str, Any], str]) -> None:
+    doc, output = alike
+    first = doc["movements"][0]  # nothing is named yet: every blob is unexplained, and said so
+    assert "explained by no named landmark" in first["ambiguous_landmarks"]["blue unexplained"]
+    assert "2 at O1, 2 at O2" in first["ambiguous_landmarks"]["blue unexplained"]
+    flagged = [m["index"] for m in doc["movements"] if m.get("ambiguous_landmarks")]
+    assert doc["association"]["movements_with_unresolved"] == flagged
+    assert f"({len(flagged)} movement(s) with ambiguities)" in output
+    assert "unresolved (landmarks that look alike)" in output
+    named = [n for m in doc["movements"] for n in m.get("named_landmarks", [])]
+    assert named == ["blue#1", "blue#2"]  # each named once, in order
 
 
 def test_coded_landmark_is_mapped_through_the_pipeline(alike: tuple[dict[str, Any], str]) -> None:
