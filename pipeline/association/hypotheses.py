@@ -49,18 +49,26 @@ class Hypothesis:
         return {r.movement for r in self.rays}
 
 
+#: Every ray of a hypothesis must pass this close to its point (in eps) ...
+FIT_TOL_EPS = 1.0
+#: ... and they must span at least this parallax (in eps; the paper's bound for a usable cone
+#: intersection is 2 eps).
+MIN_PARALLAX_EPS = 2.0
+
+
 def fit(label: str, rays: list[Ray], eps_rad: float, sigma_rad: float) -> Hypothesis | None:
-    """The hypothesis through ``rays``, or None when they do not meet ahead within ``2 eps``
-    with a parallax of at least ``2 eps`` (the paper's bound for a usable cone intersection)."""
+    """The hypothesis through ``rays``, or None when they do not all meet ahead within
+    :data:`FIT_TOL_EPS` with a parallax of at least :data:`MIN_PARALLAX_EPS`."""
     origins = np.array([r.origin_fl for r in rays], np.float64)
     dirs = np.array([r.direction_rad for r in rays], np.float64)
-    found = intersect_rays(origins, dirs, 2.0 * eps_rad)
-    if found is None or found.parallax_rad < 2.0 * eps_rad:
+    tol = FIT_TOL_EPS * eps_rad
+    found = intersect_rays(origins, dirs, tol)
+    if found is None or found.parallax_rad < MIN_PARALLAX_EPS * eps_rad:
         return None
     d = found.point_fl - origins
     ang = np.arctan2(d[:, 1], d[:, 0])
     err = np.abs(np.angle(np.exp(1j * (ang - dirs))))
-    if np.any(err > 2.0 * eps_rad):  # every ray must agree: no outlier dropped here
+    if np.any(err > tol):  # every ray must agree: no outlier dropped here
         return None
     cov = ray_point_cov(found.point_fl, origins, sigma_rad)
     keys = {(r.movement, r.end, r.detection) for r in rays}

@@ -41,7 +41,7 @@ from pipeline.joint.geometry import MovementPose, Sightings, resect
 #: A hypothesis missing from this many keyframes where it was predicted is dropped.
 MAX_MISSES = 2
 #: ... as is one not confirmed within this many movements of its birth.
-MAX_AGE = 3
+MAX_AGE = 8
 #: A placement whose robust residual exceeds this many eps is not trusted for association.
 PLACEMENT_MAX_EPS = 2.0
 #: Distinct keyframe positions (further apart than :data:`DISTINCT_FL`) and movements a
@@ -53,8 +53,10 @@ DISTINCT_FL = 0.05
 #: poorly placed to gate detections: reported, left out of the assignment.
 MAX_PRED_STD_EPS = 2.0
 #: A hypothesis sharing a ray with another is confirmed only when seen from this many more
-#: keyframes than it.
+#: keyframe positions than it.
 RIVAL_LEAD = 2
+#: ... or from as many, with an RMS ray error this many times smaller.
+RIVAL_RMS_RATIO = 2.0
 #: A hypothesis this close (2-dof chi-square, 99.9 %) to a named landmark is that landmark.
 SAME_CHI2 = 13.8
 
@@ -462,13 +464,13 @@ class Associator:
             for h in self.hypotheses[label]
             if _positions(h) >= CONFIRM_POSITIONS and len(h.movements) >= CONFIRM_MOVEMENTS
         ]
-        ready.sort(key=lambda h: (-len(h.rays), h.rms_rad))
+        ready.sort(key=lambda h: (-_positions(h), h.rms_rad))
         taken: set[tuple[int, int, int]] = set()
         for h in ready:
             rivals = [
                 o
                 for o in self.hypotheses[label]
-                if o is not h and o.keys & h.keys and len(o.rays) + RIVAL_LEAD > len(h.rays)
+                if o is not h and o.keys & h.keys and _rivals(o, h)
             ]
             if h.keys & taken or rivals:
                 continue  # its pairing is still disputed: wait for later movements
@@ -524,6 +526,14 @@ def _positions(h: Hypothesis) -> int:
         if all(math.dist(r.origin_fl, o) > DISTINCT_FL for o in kept):
             kept.append(r.origin_fl)
     return len(kept)
+
+
+def _rivals(o: Hypothesis, h: Hypothesis) -> bool:
+    """Whether ``o`` still disputes ``h`` (see :data:`RIVAL_LEAD`, :data:`RIVAL_RMS_RATIO`)."""
+    po, ph = _positions(o), _positions(h)
+    if po + RIVAL_LEAD <= ph:
+        return False
+    return not (po <= ph and o.rms_rad >= RIVAL_RMS_RATIO * h.rms_rad)
 
 
 def _chi2(d: NDArray[np.float64], cov: NDArray[np.float64]) -> float:
