@@ -10,6 +10,7 @@ import numpy as np
 
 ARENA_M = (1.6, 1.2)
 REFERENCE_M = ((0.55, 0.6), (1.05, 0.6))
+START_M = (0.8, 0.3)
 CAMERAS: dict[str, dict[str, Any]] = {
     "unwrapped": {"model": "unwrapped", "width": 960, "height": 160},
     "omni": {"model": "omni", "width": 480, "height": 480},
@@ -30,7 +31,8 @@ def alike_scenario(
     points = [REFERENCE_M[0], REFERENCE_M[1]]
     while len(points) < n + 2:
         x, y = rng.uniform(0.12, ARENA_M[0] - 0.12), rng.uniform(0.12, ARENA_M[1] - 0.12)
-        if all(math.dist((x, y), p) >= spacing_m for p in points):
+        clear = math.dist((x, y), START_M) >= spacing_m / 2  # not on the robot's start
+        if clear and all(math.dist((x, y), p) >= spacing_m for p in points):
             points.append((x, y))
             landmarks.append(
                 {"name": f"B{len(points) - 2}", "x": round(x, 4), "y": round(y, 4), "color": "blue"}

@@ -9,8 +9,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import rerun as rr
 from click.testing import CliRunner
 from logfactory import session_doc, write_log
+from mcap.reader import make_reader
 
 from recorder.sim.scenario import builtin_scenario
 from replay.cli import cli
@@ -28,15 +30,23 @@ def _scenario(tmp_path: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def alike(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], str]:
-    folder = tmp_path_factory.mktemp("alike")
+def alike_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("alike")
+
+
+@pytest.fixture(scope="module")
+def alike(alike_folder: Path) -> tuple[dict[str, Any], str]:
+    folder = alike_folder
     log = folder / "alike.mcap"
     sim = CliRunner().invoke(
         cli, ["simulate", "--scenario", str(_scenario(folder)), "--out", str(log), "--seed", "3"]
     )
     assert sim.exit_code == 0, sim.output
     summary = folder / "alike.summary.json"
-    result = CliRunner().invoke(cli, ["process", str(log), "--summary", str(summary)])
+    result = CliRunner().invoke(
+        cli,
+        ["process", str(log), "--summary", str(summary), "--out", str(folder / "derived.mcap")],
+    )
     assert result.exit_code == 0, result.output
     return json.loads(summary.read_text()), result.output
 
@@ -70,6 +80,23 @@ def test_what_association_leaves_open_is_reported(alike: tuple[dict[str, Any], s
     assert "unresolved (landmarks that look alike)" in output
     named = [n for m in doc["movements"] for n in m.get("named_landmarks", [])]
     assert named == ["blue#1", "blue#2"]  # each named once, in order
+
+
+def test_derived_log_and_rerun_show_the_names(
+    alike: tuple[dict[str, Any], str], alike_folder: Path
+) -> None:
+    with (alike_folder / "derived.mcap").open("rb") as f:
+        text = b"".join(m.data for _, _, m in make_reader(f).iter_messages())
+    assert b"blue#1" in text and b"blue#2" in text  # frames keep the catalog's per-class report
+    rrd = alike_folder / "alike.rrd"
+    result = CliRunner().invoke(
+        cli, ["replay", str(alike_folder / "alike.mcap"), "--save", str(rrd), "--keyframes-only"]
+    )
+    assert result.exit_code == 0, result.output
+    entities = {str(c.entity_path) for c in rr.chunk.RrdReader(rrd).stream()}
+    for k in (1, 2):
+        assert f"/map/ellipses/blue\\#{k}" in entities and f"/error/blue\\#{k}" in entities
+    assert not any("L3" in e or "L4" in e for e in entities if e.startswith("/map/"))
 
 
 def test_coded_landmark_is_mapped_through_the_pipeline(alike: tuple[dict[str, Any], str]) -> None:
