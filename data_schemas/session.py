@@ -43,6 +43,14 @@ class LandmarkSpec:
         return class_label(self.color, self.bands)
 
 
+def shared_classes(landmarks: Sequence[LandmarkSpec]) -> dict[str, list[str]]:
+    """Class label -> catalog names, for the classes several landmarks share (in catalog order)."""
+    by_label: dict[str, list[str]] = {}
+    for lm in landmarks:
+        by_label.setdefault(lm.label, []).append(lm.name)
+    return {label: names for label, names in by_label.items() if len(names) > 1}
+
+
 def shared_reference_problem(
     landmarks: Sequence[LandmarkSpec], reference: Sequence[str]
 ) -> str | None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -14,12 +15,15 @@ from pipeline.slam import MovementResult
 from replay.records import MethodConfig
 
 
-def estimator_for(method: MethodConfig, session: Session) -> Estimator:
-    """The estimator ``method`` asks for, set up for the session's landmarks and reference."""
+def estimator_for(
+    method: MethodConfig, session: Session, landmarks: Sequence[str] | None = None
+) -> Estimator:
+    """The estimator ``method`` asks for, set up for the session's reference and ``landmarks``
+    (default: the catalog's names)."""
     turn = None if method.turn_prior_deg is None else math.radians(method.turn_prior_deg)
     return make_estimator(
         method.estimator,
-        session.landmark_names(),
+        session.landmark_names() if landmarks is None else landmarks,
         session.reference,
         vision_error_rad=session.vision_error_rad,
         prior=method.prior_name,

@@ -115,8 +115,13 @@ def result_line(doc: dict[str, Any]) -> str:
         text += f", bearing noise {doc['bearing_noise_deg']:.2f} deg"
     if "mean_error_m" in doc:
         text += f", mean error {100 * doc['mean_error_m']:.1f} cm"
-    shared = doc.get("ambiguous_classes", {})
-    if shared:
-        names = ", ".join(f"{' '.join(v)} ({k})" for k, v in shared.items())
-        text += f"; not mapped, alike with no association: {names}"
+    assoc = doc.get("association")
+    if assoc:
+        named = ", ".join(
+            f"{label} {len(assoc['named'].get(label, []))}/{n}"
+            for label, n in assoc["catalog_count"].items()
+        )
+        text += f"; alike landmarks named: {named}"
+        if assoc["movements_with_unresolved"]:
+            text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
     return text

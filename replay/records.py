@@ -7,7 +7,7 @@ a sink never needs the estimator's internals.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, cast, get_args
 
@@ -170,9 +170,15 @@ class MovementRecord:
         Joint estimator: bearing noise std estimated from every residual of the map.
     divergence : str
         Joint estimator: why the map was re-initialized from the particles, if it was.
-    ambiguous_landmarks : dict name -> reason
-        Landmarks whose class (colour or band code) other landmarks share, so that a keyframe
-        detection could not say which one it saw: left out of this movement, never guessed.
+    ambiguous_landmarks : dict key -> reason
+        What association left unresolved in this movement (a detection of a shared class that
+        no landmark or several explain, a movement that could not be placed): never guessed.
+        Without association (keyframe missing) the catalog landmarks of shared classes.
+    not_visible : dict key -> reason
+        Named landmarks of shared classes predicted at a keyframe (``red#1@O2``) but not
+        detected there (hidden behind another, out of range).
+    named_landmarks : list of str
+        Landmarks of shared classes named with this movement (confirmed hypotheses).
     also_placed : tuple of int
         Joint estimator: earlier movements that had to wait and entered the map with this one.
     """
@@ -199,6 +205,8 @@ class MovementRecord:
     divergence: str = ""
     ambiguous_landmarks: Mapping[str, str] = field(default_factory=dict)
     also_placed: tuple[int, ...] = ()
+    not_visible: Mapping[str, str] = field(default_factory=dict)
+    named_landmarks: Sequence[str] = ()
 
     @property
     def ok(self) -> bool:

@@ -11,8 +11,10 @@ cannot be used (missing keyframe, reference landmark not visible, degenerate
 geometry) is skipped with its reason and processing goes on; the reason is in the movement's
 record (so in the summary) and is logged as a warning on the ``bslam.replay`` logger, which
 prints nothing unless the application configures it (the CLI does for one log). Landmarks of a
-class that several catalog landmarks share are ambiguous: they get no bearing (the extractor
-never guesses which blob is which), and each movement's record lists them, with a warning.
+class that several catalog landmarks share get no bearing from the extractor (it never guesses
+which blob is which); :mod:`replay.alike` associates the blobs with the map and names the
+landmarks ``red#1``, ``red#2``, ...; what it cannot resolve is in each movement's record, with a
+warning.
 """
 
 from __future__ import annotations
@@ -31,10 +33,11 @@ from numpy.typing import NDArray
 from data_schemas.errors import EstimationError, ImageError
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
-from data_schemas.session import Session, shared_reference_problem
+from data_schemas.session import Session, shared_classes, shared_reference_problem
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import BearingExtractor, Detection, decode_frame
 from pipeline.slam import MovementObservation, MovementResult
+from replay.alike import AlikeLandmarks
 from replay.estimation import estimator_for, joint_fields
 from replay.plan import PLAN_TOPICS, MovementPlan
 from replay.records import (
@@ -149,7 +152,11 @@ class Runner:
         if shared:
             raise EstimationError(f"{log.name}: {shared}")
         self.extractor = BearingExtractor(self.session.calibration, self.session.landmarks)
-        self.slam = estimator_for(method, self.session)
+        alike = shared_classes(self.session.landmarks)
+        self.alike = AlikeLandmarks(self.session) if alike else None
+        names = self.session.landmark_names()
+        mapped = self.alike.landmarks(names) if self.alike is not None else names
+        self.slam = estimator_for(method, self.session, mapped)
         self.all_frames = any(s.wants_all_frames for s in self.sinks)
         self.images = any(s.wants_images for s in self.sinks)
         self.state = _State()
@@ -282,17 +289,35 @@ class Runner:
                 {n: b for n, (_, b) in bearings.items() if b is not None},
                 self.plan.turns_rad.get(index),
             )
+            assoc = None
+            if self.alike is not None:
+                obs, assoc = self.alike.observe(
+                    index, (start.detections, end.detections), obs.turn_rad, self.slam
+                )
             result = self.slam.process_movement(obs)
+            if self.alike is not None and assoc is not None:
+                self.alike.after(assoc, result, self.slam)
+                bearings = {n: b for n, b in bearings.items() if n not in self.alike.alike}
+                for name in self.alike.associator.names:
+                    pair = (assoc.bearings_o1_rad.get(name), assoc.bearings_o2_rad.get(name))
+                    if pair != (None, None):
+                        bearings[name] = pair
+                ambiguous = dict(assoc.unresolved)
             record = self._record(result, t_ns, log_time_ns, bearings, start, end)
             record = replace(record, ambiguous_landmarks=ambiguous)
+            if assoc is not None:
+                record = replace(
+                    record, not_visible=dict(assoc.not_visible), named_landmarks=assoc.confirmed
+                )
         if not record.ok:
             logger.warning("%s: movement %d %s", self.log.name, index, record.status)
         if ambiguous:
             logger.warning(
-                "%s: movement %d: %s not used (landmarks that look alike, no association)",
+                "%s: movement %d: %s unresolved (landmarks that look alike): %s",
                 self.log.name,
                 index,
                 ", ".join(sorted(ambiguous)),
+                "; ".join(ambiguous[k] for k in sorted(ambiguous)),
             )
         for sink in self.sinks:
             sink.movement(record)

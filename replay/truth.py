@@ -8,10 +8,12 @@ reference pair L1 -> (0, 0) and L2 -> (1, 0) (unit |L1 L2|). Errors in FL units 
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
 
 from pipeline.frame_change import to_fl
 
@@ -62,6 +64,49 @@ class Truth:
         """Distance (metres) between an FL estimate of ``name`` and its true position."""
         diff = np.asarray(mean_fl, np.float64) - self.to_fl.apply(self.landmarks_world[name])
         return float(np.hypot(*diff)) * self.to_fl.unit_m
+
+
+def class_of_name(name: str) -> str | None:
+    """The class label of a landmark named by association (``"red#2"`` -> ``"red"``), else None."""
+    label, sep, number = name.rpartition("#")
+    return label if sep and label and number.isdigit() else None
+
+
+def match_truth(
+    truth: Truth, means_fl: Mapping[str, NDArray[np.floating]], classes: Mapping[str, Sequence[str]]
+) -> dict[str, str]:
+    """Which true landmark each estimate is: catalog names are themselves; a landmark named by
+    association (``red#k``) is matched to the nearest true landmark of its class, one-to-one
+    over the class (least total distance, scipy's ``linear_sum_assignment``).
+
+    ``classes`` maps each shared class label to its catalog names. Estimates that match nothing
+    (a class with no true landmark) are left out.
+    """
+    out = {n: n for n in means_fl if n in truth.landmarks_world}
+    fl = truth.landmarks_fl()
+    by_class: dict[str, list[str]] = {}
+    for n in means_fl:
+        label = class_of_name(n)
+        if n not in out and label is not None and label in classes:
+            by_class.setdefault(label, []).append(n)
+    for label, names in by_class.items():
+        trues = [t for t in classes[label] if t in fl]
+        if not trues:
+            continue
+        cost = np.array(
+            [[float(np.hypot(*(np.asarray(means_fl[n]) - fl[t]))) for t in trues] for n in names]
+        )
+        rows, cols = linear_sum_assignment(cost)
+        out.update({names[r]: trues[c] for r, c in zip(rows, cols, strict=True)})
+    return out
+
+
+def errors_m(
+    truth: Truth, means_fl: Mapping[str, NDArray[np.floating]], classes: Mapping[str, Sequence[str]]
+) -> dict[str, float]:
+    """Error (m) of each estimate against the true landmark :func:`match_truth` gives it."""
+    matched = match_truth(truth, means_fl, classes)
+    return {n: truth.error_m(t, means_fl[n]) for n, t in matched.items()}
 
 
 def truth_from_scenario(scenario: dict[str, object], reference: tuple[str, str]) -> Truth:

@@ -647,6 +647,24 @@ class JointSlam:
             out[name] = LandmarkEstimate(self._point(name), 0.5 * (cov + cov.T))
         self._estimates = out
 
+    def add_history(self, name: str, bearings: Sequence[tuple[int, int, float]]) -> None:
+        """Bearings of ``name`` from movements already in the graph, known only now.
+
+        An association step names a landmark of a shared class once it is confirmed; its
+        earlier bearings ``(movement, end, bearing_rad)`` join their movement (placed or waiting)
+        and wait with the landmark's own until it enters the graph (other movements: ignored).
+        """
+        if name not in self._lm_index or name in self._in_graph:
+            return
+        for movement, end, b in bearings:
+            m = self._placed.get(movement) or self._waiting.get(movement)
+            if m is None or not math.isfinite(b):
+                continue
+            bearing = g.Bearing(movement, end, name, float(b))
+            m.bearings.append(bearing)
+            if movement in self._placed:  # a waiting movement brings it when placed
+                self._pending.setdefault(name, []).append(bearing)
+
     # ------------------------------------------------------------------ one movement
     def process_movement(self, obs: MovementObservation) -> JointMovementResult:
         """Initialize with the paper's filter, place the movement, add its bearings, update."""

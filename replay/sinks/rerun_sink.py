@@ -43,9 +43,11 @@ from numpy.typing import NDArray
 
 from data_schemas.calibration import Calibration, UnwrappedCalibration
 from data_schemas.colors import NOMINAL_BGR
-from data_schemas.session import Session
+from data_schemas.session import Session, shared_classes
+from pipeline.association.tracker import slot_name
 from replay.fig1 import log_fig1
 from replay.records import FrameRecord, MovementRecord, RunInfo
+from replay.truth import errors_m
 
 LOG_TIME = "log_time"
 MOVEMENT = "movement"
@@ -64,6 +66,8 @@ def landmark_rgb(session: Session) -> dict[str, tuple[int, int, int]]:
     for spec in session.landmarks:
         b, g, r = NOMINAL_BGR.get(spec.bands[0] if spec.bands else str(spec.color), (200, 200, 200))
         out[spec.name] = (r, g, b)
+    for label, names in shared_classes(session.landmarks).items():  # red#1 ... as their class
+        out.update({slot_name(label, k): out[names[0]] for k in range(1, len(names) + 1)})
     return out
 
 
@@ -183,7 +187,7 @@ class RerunSink:
         log("camera/panorama/masks", masks, static=True)
         lines = rr.LineStrips2D.from_fields(radii=rr.Radius.ui_points(1.5))
         log("camera/panorama/detections", lines, static=True)
-        for name in s.landmark_names():
+        for name in self._rgb:  # the catalog, then names given by association (red#1, ...)
             series = rr.SeriesPoints(colors=[self._rgb[name]], names=[name], marker_sizes=[2.0])
             log(f"bearings/{name}", series, static=True)
             line = rr.SeriesLines(colors=[self._rgb[name]], names=[name])
@@ -387,7 +391,8 @@ class RerunSink:
             ends = np.array([record.truth_o1_world, record.truth_o2_world])
             self._truth_trajectory_fl.append(truth.to_fl.apply(ends))
             self._log_path("map/truth/trajectory", self._truth_trajectory_fl, TRUTH_RGB, None)
-        errors = {n: truth.error_m(n, record.estimates[n].mean_fl) for n in names}
+        means = {n: record.estimates[n].mean_fl for n in names}
+        errors = errors_m(truth, means, shared_classes(run.session.landmarks))
         for n, e in errors.items():
             log(f"error/{n}", rr.Scalars(e))
         if errors:

@@ -8,23 +8,28 @@ With the joint estimator a movement also carries its ``placement`` (``reference 
 ``resection``), its bearing ``residuals_deg`` and the ``bearing_noise_deg`` estimated so far (and
 ``divergence`` when the map was re-initialized); the document ends with the final
 ``bearing_noise_deg`` and the number of ``reinitializations``.
-``ambiguous_classes`` (class -> landmarks) lists the classes several catalog landmarks share and
-``movements[k].ambiguous_landmarks`` (name -> reason) the landmarks left out of movement k for
-it: without association they are never mapped from a guess.
+``ambiguous_classes`` (class -> landmarks) lists the classes several catalog landmarks share;
+their landmarks are named by association (``red#1``, ... in order of confirmation,
+:mod:`pipeline.association`). ``movements[k].ambiguous_landmarks`` (key -> reason) is what
+movement k left unresolved (contested or unexplained detections, a movement not placed),
+``not_visible`` the named landmarks predicted but not detected, ``named_landmarks`` those named
+with it; ``association`` sums up the names per class, the catalog counts, the movements with
+something unresolved and, for simulated logs, ``matched_truth`` (each ``red#k`` matched to the
+nearest true landmark of its class, one-to-one; ``error_m`` is measured against it).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
-from data_schemas.session import LandmarkSpec
+from data_schemas.session import shared_classes
 from replay.records import EstimateRecord, FrameRecord, MovementRecord, RunInfo
+from replay.truth import class_of_name, errors_m, match_truth
 
 DIGITS = 9
 
@@ -46,14 +51,6 @@ def _estimate(e: EstimateRecord) -> dict[str, Any]:
     return {"mean": _xy(e.mean_fl), "cov": [_xy(c[0]), _xy(c[1])]}
 
 
-def _shared_classes(landmarks: Sequence[LandmarkSpec]) -> dict[str, list[str]]:
-    """Class label -> catalog names, for the classes several landmarks share."""
-    by_label: dict[str, list[str]] = {}
-    for lm in landmarks:
-        by_label.setdefault(lm.label, []).append(lm.name)
-    return {label: names for label, names in by_label.items() if len(names) > 1}
-
-
 class SummarySink:
     """Builds the summary document; read it from :attr:`document` after ``finish``."""
 
@@ -67,6 +64,7 @@ class SummarySink:
         self._errors_m: dict[str, float] = {}
         self._noise_rad: float | None = None
         self._reinitializations = 0
+        self._matched: dict[str, str] = {}
 
     def start(self, run: RunInfo) -> None:
         self._run = run
@@ -80,7 +78,7 @@ class SummarySink:
             "movements": [],
             "landmarks": {},
         }
-        shared = _shared_classes(s.landmarks)
+        shared = shared_classes(s.landmarks)
         if shared:
             self.document["ambiguous_classes"] = shared
         if run.truth is not None:
@@ -122,6 +120,10 @@ class SummarySink:
             self._reinitializations += 1
         if record.ambiguous_landmarks:
             entry["ambiguous_landmarks"] = dict(record.ambiguous_landmarks)
+        if record.not_visible:
+            entry["not_visible"] = dict(record.not_visible)
+        if record.named_landmarks:
+            entry["named_landmarks"] = list(record.named_landmarks)
         if record.ok:
             self._landmarks = {
                 name: _estimate(e) for name, e in record.estimates.items() if name not in reference
@@ -132,12 +134,11 @@ class SummarySink:
                     "o2": _xy(record.o2_fl.mean(axis=0)),
                 }
             if self._run.truth is not None:
-                truth = self._run.truth
-                self._errors_m = {
-                    name: truth.error_m(name, e.mean_fl)
-                    for name, e in record.estimates.items()
-                    if name not in reference and name in truth.landmarks_world
-                }
+                means = {n: e.mean_fl for n, e in record.estimates.items() if n not in reference}
+                shared = shared_classes(self._run.session.landmarks)
+                self._errors_m = errors_m(self._run.truth, means, shared)
+                if shared:
+                    self._matched = match_truth(self._run.truth, means, shared)
         entry["landmarks"] = self._landmarks
         if self._run.truth is not None and self._errors_m:
             entry["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}
@@ -146,9 +147,33 @@ class SummarySink:
 
     def finish(self) -> None:
         self.document["landmarks"] = self._landmarks
+        if self._run is not None:
+            self._association_summary(self._run)
         if self._noise_rad is not None:
             self.document["bearing_noise_deg"] = round(math.degrees(self._noise_rad), 6)
             self.document["reinitializations"] = self._reinitializations
         if self._errors_m:
             self.document["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}
             self.document["mean_error_m"] = _num(float(np.mean(list(self._errors_m.values()))))
+
+    def _association_summary(self, run: RunInfo) -> None:
+        """Per shared class: the names given, how many movements left something unresolved."""
+        shared = shared_classes(run.session.landmarks)
+        if not shared:
+            return
+        named = {
+            label: sorted(
+                (n for n in self._landmarks if class_of_name(n) == label),
+                key=lambda n: int(n.rpartition("#")[2]),
+            )
+            for label in shared
+        }
+        moves = self.document["movements"]
+        unresolved = [m["index"] for m in moves if m.get("ambiguous_landmarks")]
+        self.document["association"] = {
+            "named": named,
+            "catalog_count": {label: len(v) for label, v in shared.items()},
+            "movements_with_unresolved": unresolved,
+        }
+        if self._matched:
+            self.document["association"]["matched_truth"] = dict(sorted(self._matched.items()))

@@ -1,5 +1,6 @@
-"""Landmarks that look alike: never mapped from a guess, reported per movement and in the summary;
-coded landmarks go through the whole pipeline (real simulator, ``bslam simulate`` / ``process``)."""
+"""Landmarks that look alike: named by association (``blue#1``), what stays open reported per
+movement and in the summary; coded landmarks go through the whole pipeline (real simulator,
+``bslam simulate`` / ``process``)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import rerun as rr
 from click.testing import CliRunner
 from logfactory import session_doc, write_log
+from mcap.reader import make_reader
 
 from recorder.sim.scenario import builtin_scenario
 from replay.cli import cli
@@ -27,33 +30,73 @@ def _scenario(tmp_path: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def alike(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], str]:
-    folder = tmp_path_factory.mktemp("alike")
+def alike_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("alike")
+
+
+@pytest.fixture(scope="module")
+def alike(alike_folder: Path) -> tuple[dict[str, Any], str]:
+    folder = alike_folder
     log = folder / "alike.mcap"
     sim = CliRunner().invoke(
         cli, ["simulate", "--scenario", str(_scenario(folder)), "--out", str(log), "--seed", "3"]
     )
     assert sim.exit_code == 0, sim.output
     summary = folder / "alike.summary.json"
-    result = CliRunner().invoke(cli, ["process", str(log), "--summary", str(summary)])
+    result = CliRunner().invoke(
+        cli,
+        ["process", str(log), "--summary", str(summary), "--out", str(folder / "derived.mcap")],
+    )
     assert result.exit_code == 0, result.output
     return json.loads(summary.read_text()), result.output
 
 
-def test_alike_landmarks_are_reported_not_guessed(alike: tuple[dict[str, Any], str]) -> None:
+def test_alike_landmarks_are_named_by_association(alike: tuple[dict[str, Any], str]) -> None:
     doc, output = alike
     assert doc["ambiguous_classes"] == {"blue": ["L3", "L4"]}
+    # catalog names of a shared class are never used: the map says blue#1, blue#2
     assert "L3" not in doc["landmarks"] and "L4" not in doc["landmarks"]
-    flagged = 0
+    assoc = doc["association"]
+    assert assoc["named"] == {"blue": ["blue#1", "blue#2"]}
+    assert assoc["catalog_count"] == {"blue": 2}
+    matched = assoc["matched_truth"]
+    assert sorted(matched[n] for n in ("blue#1", "blue#2")) == ["L3", "L4"]
+    errors = [doc["error_m"][n] for n in ("blue#1", "blue#2")]
+    assert max(errors) <= 0.10 and sum(errors) / 2 <= 0.03
     for move in doc["movements"]:
-        assert "L3" not in move["landmarks"] and "L4" not in move["landmarks"]
-        assert move["bearings_deg"]["L3"] == [None, None] == move["bearings_deg"]["L4"]
-        for name, reason in move.get("ambiguous_landmarks", {}).items():
-            assert name in ("L3", "L4") and "shared with" in reason and "blob" in reason
-            flagged += 1
-    assert flagged >= len(doc["movements"])  # seen in most keyframes, flagged every time
-    assert "not mapped, alike with no association: L3 L4 (blue)" in output
-    assert "L3, L4 not used (landmarks that look alike" in output
+        assert "L3" not in move["bearings_deg"] and "L4" not in move["bearings_deg"]
+        assert set(move["landmarks"]) <= {"L5", "blue#1", "blue#2"}
+    assert "alike landmarks named: blue 2/2" in output
+
+
+def test_what_association_leaves_open_is_reported(alike: tuple[dict[str, Any], str]) -> None:
+    doc, output = alike
+    first = doc["movements"][0]  # nothing is named yet: every blob is unexplained, and said so
+    assert "explained by no named landmark" in first["ambiguous_landmarks"]["blue unexplained"]
+    assert "2 at O1, 2 at O2" in first["ambiguous_landmarks"]["blue unexplained"]
+    flagged = [m["index"] for m in doc["movements"] if m.get("ambiguous_landmarks")]
+    assert doc["association"]["movements_with_unresolved"] == flagged
+    assert f"({len(flagged)} movement(s) with ambiguities)" in output
+    assert "unresolved (landmarks that look alike)" in output
+    named = [n for m in doc["movements"] for n in m.get("named_landmarks", [])]
+    assert named == ["blue#1", "blue#2"]  # each named once, in order
+
+
+def test_derived_log_and_rerun_show_the_names(
+    alike: tuple[dict[str, Any], str], alike_folder: Path
+) -> None:
+    with (alike_folder / "derived.mcap").open("rb") as f:
+        text = b"".join(m.data for _, _, m in make_reader(f).iter_messages())
+    assert b"blue#1" in text and b"blue#2" in text  # frames keep the catalog's per-class report
+    rrd = alike_folder / "alike.rrd"
+    result = CliRunner().invoke(
+        cli, ["replay", str(alike_folder / "alike.mcap"), "--save", str(rrd), "--keyframes-only"]
+    )
+    assert result.exit_code == 0, result.output
+    entities = {str(c.entity_path) for c in rr.chunk.RrdReader(rrd).stream()}
+    for k in (1, 2):
+        assert f"/map/ellipses/blue\\#{k}" in entities and f"/error/blue\\#{k}" in entities
+    assert not any("L3" in e or "L4" in e for e in entities if e.startswith("/map/"))
 
 
 def test_coded_landmark_is_mapped_through_the_pipeline(alike: tuple[dict[str, Any], str]) -> None:

@@ -1,0 +1,139 @@
+"""Gated one-to-one assignment of detections to predicted landmarks, refusing to guess.
+
+Cost of pairing landmark ``i`` with detection ``j``: the squared Mahalanobis distance
+``d2 = (wrap(b_j - pred_i) / std_i)^2`` (one degree of freedom). A pair is plausible when
+``d2 <= gate``. Landmarks and detections split into groups linked by plausible pairs; a group of
+one landmark and one detection is a match; in a larger group the best one-to-one assignment
+(scipy's ``linear_sum_assignment``; leaving a landmark or a detection alone costs ``gate``) is
+kept only for pairs whose every alternative costs at least ``margin`` more; the rest of the
+group is contested (reported, never used).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from data_schemas.angles import wrap_rad
+
+#: Chi-square gate, one degree of freedom, 99.9 %.
+GATE_CHI2 = 10.83
+#: A pairing is unique when every alternative assignment costs this much more (chi-square units).
+MARGIN_CHI2 = 9.0
+_BIG = 1e9
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """What :func:`assign` decided for one keyframe and one class.
+
+    Attributes
+    ----------
+    pairs : list of (int, int)
+        ``(landmark index, detection index)`` matches.
+    missing : list of int
+        Landmarks with no plausible detection (hidden, out of range, or not seen).
+    unexplained : list of int
+        Detections no landmark explains (candidates for new landmarks).
+    contested_landmarks, contested_detections : list of int
+        Landmarks and detections of groups the assignment could not resolve.
+    d2 : (n, m) float
+        The Mahalanobis costs.
+    """
+
+    pairs: list[tuple[int, int]] = field(default_factory=list)
+    missing: list[int] = field(default_factory=list)
+    unexplained: list[int] = field(default_factory=list)
+    contested_landmarks: list[int] = field(default_factory=list)
+    contested_detections: list[int] = field(default_factory=list)
+    d2: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
+
+
+def _solve(d2: NDArray[np.float64], gate: float) -> tuple[float, list[tuple[int, int]]]:
+    """Best assignment with "alone" options at cost ``gate``; its cost and its pairs."""
+    n, m = d2.shape
+    big = np.full((n + m, m + n), _BIG)
+    big[:n, :m] = np.where(d2 <= gate, d2, _BIG)
+    big[:n, m:] = np.where(np.eye(n, dtype=bool), gate, _BIG)
+    big[n:, :m] = np.where(np.eye(m, dtype=bool), gate, _BIG)
+    big[n:, m:] = 0.0
+    rows, cols = linear_sum_assignment(big)
+    pairs = [(int(r), int(c)) for r, c in zip(rows, cols, strict=True) if r < n and c < m]
+    return float(big[rows, cols].sum()), pairs
+
+
+def _groups(plausible: NDArray[np.bool_]) -> list[tuple[list[int], list[int]]]:
+    """Connected groups (landmarks, detections) of the plausible-pair graph."""
+    n, m = plausible.shape
+    seen_l = np.zeros(n, bool)
+    seen_d = np.zeros(m, bool)
+    out = []
+    for start in range(n):
+        if seen_l[start]:
+            continue
+        lms, dets, todo = [start], [], [start]
+        seen_l[start] = True
+        while todo:
+            i = todo.pop()
+            for j in np.flatnonzero(plausible[i] & ~seen_d):
+                seen_d[j] = True
+                dets.append(int(j))
+                for k in np.flatnonzero(plausible[:, j] & ~seen_l):
+                    seen_l[k] = True
+                    lms.append(int(k))
+                    todo.append(int(k))
+        out.append((sorted(lms), sorted(dets)))
+    out.extend(([], [int(j)]) for j in np.flatnonzero(~seen_d))
+    return out
+
+
+def assign(
+    pred_rad: NDArray[np.float64],
+    pred_std_rad: NDArray[np.float64],
+    det_rad: NDArray[np.float64],
+    *,
+    gate: float = GATE_CHI2,
+    margin: float = MARGIN_CHI2,
+) -> Assignment:
+    """Assign detections (m,) to predicted bearings (n,) with stds (n,), one-to-one.
+
+    Returns
+    -------
+    Assignment
+        Matches, landmarks with no plausible detection, detections no landmark explains, and
+        the contested rest.
+    """
+    pred = np.asarray(pred_rad, np.float64).reshape(-1)
+    std = np.maximum(np.asarray(pred_std_rad, np.float64).reshape(-1), 1e-9)
+    det = np.asarray(det_rad, np.float64).reshape(-1)
+    d2 = (wrap_rad(det[None, :] - pred[:, None]) / std[:, None]) ** 2
+    plausible = d2 <= gate
+    out = Assignment(d2=d2)
+    for lms, dets in _groups(plausible):
+        if not dets:
+            out.missing.extend(lms)
+        elif not lms:
+            out.unexplained.extend(dets)
+        elif len(lms) == 1 and len(dets) == 1:
+            out.pairs.append((lms[0], dets[0]))
+        else:
+            sub = d2[np.ix_(lms, dets)]
+            best, pairs = _solve(sub, gate)
+            sure = []
+            for i, j in pairs:
+                alt = sub.copy()
+                alt[i, j] = _BIG
+                if _solve(alt, gate)[0] - best >= margin:
+                    sure.append((i, j))
+            out.pairs.extend((lms[i], dets[j]) for i, j in sure)
+            out.contested_landmarks.extend(
+                lms[i] for i in range(len(lms)) if i not in {p[0] for p in sure}
+            )
+            out.contested_detections.extend(
+                dets[j] for j in range(len(dets)) if j not in {p[1] for p in sure}
+            )
+    out.pairs.sort()
+    return out

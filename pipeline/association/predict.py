@@ -1,0 +1,67 @@
+"""Predicted bearings of mapped points and their uncertainty (FL, rad)."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.angles import wrap_rad
+
+
+def predict_bearings(
+    origin_fl: NDArray[np.float64],
+    heading_rad: float,
+    points_fl: NDArray[np.float64],
+    covs_fl: NDArray[np.float64],
+    *,
+    origin_var_fl: float = 0.0,
+    bearing_var_rad: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Bearing of each point seen from a keyframe, and its standard deviation.
+
+    Parameters
+    ----------
+    origin_fl : (2,) float
+        Keyframe position, FL.
+    heading_rad : float
+        Keyframe heading, FL (bearings are relative to it).
+    points_fl : (n, 2) float
+        Point estimates, FL.
+    covs_fl : (n, 2, 2) float
+        Their covariances, FL^2.
+    origin_var_fl : float
+        Variance of the keyframe position along any direction, FL^2.
+    bearing_var_rad : float
+        Variance added to every prediction (measurement noise, heading), rad^2.
+
+    Returns
+    -------
+    bearing_rad : (n,) float
+        Predicted bearings in [-pi, pi).
+    std_rad : (n,) float
+        First-order standard deviation of each prediction.
+    """
+    d = np.asarray(points_fl, np.float64).reshape(-1, 2) - np.asarray(origin_fl, np.float64)
+    r2 = np.maximum((d**2).sum(axis=1), 1e-12)
+    jac = np.column_stack((-d[:, 1], d[:, 0])) / r2[:, None]  # d bearing / d point, (n, 2)
+    var = np.einsum("ni,nij,nj->n", jac, np.asarray(covs_fl, np.float64).reshape(-1, 2, 2), jac)
+    var = var + origin_var_fl / r2 + bearing_var_rad
+    bearing = wrap_rad(np.arctan2(d[:, 1], d[:, 0]) - heading_rad)
+    return np.asarray(bearing, np.float64), np.sqrt(np.maximum(var, 0.0))
+
+
+def ray_point_cov(
+    point_fl: NDArray[np.float64], origins_fl: NDArray[np.float64], sigma_rad: float
+) -> NDArray[np.float64]:
+    """Covariance (2, 2) of a point fixed by bearings of std ``sigma_rad`` from ``origins_fl``.
+
+    First order: each bearing from origin ``o`` constrains the point across the ray with
+    information ``n n^T / (|p - o|^2 sigma^2)`` (``n`` the unit normal of the ray); a tiny
+    ridge keeps the inverse finite when the rays are parallel.
+    """
+    d = np.asarray(point_fl, np.float64) - np.asarray(origins_fl, np.float64).reshape(-1, 2)
+    r2 = np.maximum((d**2).sum(axis=1), 1e-12)
+    n = np.column_stack((-d[:, 1], d[:, 0])) / np.sqrt(r2)[:, None]
+    info = (n / (r2 * sigma_rad**2)[:, None]).T @ n + 1e-9 * np.eye(2)
+    cov: NDArray[np.float64] = np.linalg.inv(info)
+    return cov

@@ -1,0 +1,551 @@
+"""Per-movement association of landmarks that look alike: place, predict, assign, hypothesize.
+
+For each movement (its two keyframes, O1 and O2):
+
+1. Place the movement by resection (:func:`pipeline.joint.geometry.resect`) from the bearings of
+   landmarks whose class is their own (the reference pair included) and their map estimates.
+2. Per shared class, predict the bearing of each landmark already named (``red#1``, ...) from
+   O1 and O2, with its std from the map covariance, the placement and the bearing noise, and
+   assign the class's detections (:func:`pipeline.association.assign.assign`).
+3. Detections no named landmark explains feed the hypotheses of the class: a hypothesis whose
+   gate holds one detection gains that ray; one with none counts a miss. Pairs of detections
+   still unexplained, one from each keyframe, whose rays meet ahead of both start new
+   hypotheses (every pairing the two cones allow).
+4. A hypothesis seen from at least three keyframes of two movements with every ray within
+   ``2 eps`` of its point is confirmed: it is named ``label#k`` (k in order of confirmation)
+   while the class has fewer named landmarks than the catalog has; hypotheses sharing a ray
+   with it are dropped. A hypothesis that misses :data:`MAX_MISSES` keyframes, or is not
+   confirmed within :data:`MAX_AGE` movements, is dropped.
+
+Whatever is left unresolved (contested detections, unexplained detections, a class beyond its
+catalog count, a movement that cannot be placed) is reported in the movement's result.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.angles import wrap_rad
+from pipeline.association.assign import GATE_CHI2, Assignment, assign
+from pipeline.association.hypotheses import Hypothesis, Ray, fit
+from pipeline.association.predict import predict_bearings
+from pipeline.crb import truncated_gaussian_std
+from pipeline.estimate import LandmarkEstimate
+from pipeline.joint.geometry import MovementPose, Sightings, resect
+
+#: A hypothesis missing from this many keyframes where it was predicted is dropped.
+MAX_MISSES = 2
+#: ... as is one not confirmed within this many movements of its birth.
+MAX_AGE = 8
+#: A placement whose robust residual exceeds this many eps is not trusted for association.
+PLACEMENT_MAX_EPS = 2.0
+#: Distinct keyframe positions (further apart than :data:`DISTINCT_FL`) and movements a
+#: hypothesis needs to be confirmed (the start of a movement is where the last one ended).
+CONFIRM_POSITIONS = 3
+CONFIRM_MOVEMENTS = 2
+DISTINCT_FL = 0.05
+#: A named landmark whose predicted bearing is less certain than this (std, in eps) is too
+#: poorly placed to gate detections: reported, left out of the assignment.
+MAX_PRED_STD_EPS = 2.0
+#: A hypothesis sharing a ray with another is confirmed only when seen from this many more
+#: keyframe positions than it.
+RIVAL_LEAD = 2
+#: ... or from as many, with an RMS ray error this many times smaller.
+RIVAL_RMS_RATIO = 2.0
+#: A hypothesis this close (2-dof chi-square, 99.9 %) to a named landmark is that landmark.
+SAME_CHI2 = 13.8
+
+
+def slot_name(label: str, k: int) -> str:
+    """The name of the ``k``-th confirmed landmark of class ``label`` (``red#1``)."""
+    return f"{label}#{k}"
+
+
+@dataclass
+class MovementAssociation:
+    """What association did for one movement.
+
+    Attributes
+    ----------
+    index : int
+        The movement.
+    bearings_o1_rad, bearings_o2_rad : dict name -> float
+        Bearings given to named landmarks of shared classes at O1 and O2 (rad).
+    names : dict label -> (list, list)
+        Per class, the name given to each detection at O1 and at O2 (None: not associated),
+        in the order of the detections passed in.
+    confirmed : list of str
+        Landmarks named with this movement.
+    history : dict name -> list of (movement, end, bearing_rad)
+        Bearings of the landmarks named with this movement from earlier movements (for an
+        estimator that can take them late).
+    unresolved : dict key -> str
+        Ambiguities not resolved (key: a landmark name or a class label, with the keyframe).
+    not_visible : dict name -> str
+        Named landmarks predicted but not detected (hidden behind another, out of range).
+    n_hypotheses : int
+        Live hypotheses after this movement.
+    pose : MovementPose or None
+        The placement used (None: the movement could not be placed).
+    """
+
+    index: int
+    bearings_o1_rad: dict[str, float] = field(default_factory=dict)
+    bearings_o2_rad: dict[str, float] = field(default_factory=dict)
+    names: dict[str, tuple[list[str | None], list[str | None]]] = field(default_factory=dict)
+    confirmed: list[str] = field(default_factory=list)
+    history: dict[str, list[tuple[int, int, float]]] = field(default_factory=dict)
+    unresolved: dict[str, str] = field(default_factory=dict)
+    not_visible: dict[str, str] = field(default_factory=dict)
+    n_hypotheses: int = 0
+    pose: MovementPose | None = None
+
+
+def _deg(x: float) -> str:
+    return f"{math.degrees(x):.1f} deg"
+
+
+class Associator:
+    """Names detections of shared classes across movements (see the module docstring).
+
+    Parameters
+    ----------
+    classes : mapping label -> int
+        Each shared class and how many catalog landmarks have it (the most that may be named).
+    reference : (str, str)
+        The reference pair, at (0, 0) and (1, 0) in FL.
+    vision_error_rad : float
+        The bearing error bound eps.
+    """
+
+    def __init__(
+        self, classes: Mapping[str, int], reference: tuple[str, str], *, vision_error_rad: float
+    ) -> None:
+        self.capacity = dict(classes)
+        self.reference = reference
+        self.eps_rad = float(vision_error_rad)
+        self.sigma_rad = truncated_gaussian_std(self.eps_rad)
+        self.named: dict[str, list[str]] = {c: [] for c in self.capacity}
+        self.hypotheses: dict[str, list[Hypothesis]] = {c: [] for c in self.capacity}
+        #: named landmarks the estimator has not mapped yet: their rays, refitted as they grow
+        self.unmapped: dict[str, Hypothesis] = {}
+        self._last: tuple[int, MovementPose] | None = None
+        self._dets: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+        self._free: dict[str, tuple[list[int], list[int]]] = {}
+
+    @property
+    def names(self) -> list[str]:
+        """Every name a landmark of a shared class may get, class by class (``red#1`` ...)."""
+        return [slot_name(c, k + 1) for c, n in self.capacity.items() for k in range(n)]
+
+    # ------------------------------------------------------------------ placement
+    def _place(
+        self,
+        index: int,
+        bearings: tuple[Mapping[str, float], Mapping[str, float]],
+        mapped: Mapping[str, LandmarkEstimate],
+    ) -> tuple[MovementPose, float] | str:
+        points = {self.reference[0]: np.zeros(2), self.reference[1]: np.array([1.0, 0.0])}
+        points.update({n: e.mean_fl for n, e in mapped.items() if n not in self.reference})
+        pts, ends, bs = [], [], []
+        for end, bmap in enumerate(bearings):
+            for name, b in bmap.items():
+                if name in points and math.isfinite(b):
+                    pts.append(points[name])
+                    ends.append(end)
+                    bs.append(float(b))
+        s = Sightings(
+            np.array(pts, np.float64).reshape(-1, 2), np.array(ends, np.int64), np.array(bs)
+        )
+        n1, n2 = int((s.end == 0).sum()), int((s.end == 1).sum())
+        if n1 < 1 or n2 < 1 or n1 + n2 < 4:
+            return f"too few bearings of mapped landmarks to place it ({n1} at O1, {n2} at O2)"
+        if self._last is not None and self._last[0] == index - 1 and n1 >= 1:
+            chained = _place_chained(s, self._last[1].o2_fl, self.sigma_rad)
+            if chained is not None:
+                pose = chained[0]
+                r = s.residuals(np.array([*pose.o1_fl, pose.heading_rad, math.log(pose.length_fl)]))
+                if 1.4826 * float(np.median(np.abs(r))) <= PLACEMENT_MAX_EPS * self.eps_rad:
+                    return chained
+        found = resect(s, guesses=[])
+        if found is None:
+            return "cannot be placed"
+        robust = 1.4826 * float(np.median(np.abs(found.residuals_rad)))
+        if robust > PLACEMENT_MAX_EPS * self.eps_rad or not math.isfinite(found.position_std_fl):
+            return f"placement does not fit the map (robust residual {_deg(robust)})"
+        return found.pose, found.position_std_fl * self.sigma_rad
+
+    # ------------------------------------------------------------------ one movement
+    def associate(
+        self,
+        index: int,
+        unique: tuple[Mapping[str, float], Mapping[str, float]],
+        detections: tuple[Mapping[str, Sequence[float]], Mapping[str, Sequence[float]]],
+        mapped: Mapping[str, LandmarkEstimate],
+    ) -> MovementAssociation:
+        """Name one movement's detections of shared classes after the landmarks already named.
+
+        Call :meth:`hypothesize` once the estimator has placed the movement.
+
+        Parameters
+        ----------
+        index : int
+            The movement (consecutive indices are chained by a turn in place).
+        unique : (dict, dict)
+            Bearings (rad) at O1 and at O2 of landmarks whose class is their own.
+        detections : (dict, dict)
+            Per shared class label, the bearings (rad) of its detections at O1 and at O2.
+        mapped : dict name -> LandmarkEstimate
+            The estimator's current map (FL), named landmarks of shared classes included.
+        """
+        out = MovementAssociation(index)
+        self._dets = {
+            c: (
+                np.asarray(detections[0].get(c, ()), np.float64),
+                np.asarray(detections[1].get(c, ()), np.float64),
+            )
+            for c in self.capacity
+        }
+        self._free = {c: ([], []) for c in self.capacity}
+        for c, (d1, d2) in self._dets.items():
+            out.names[c] = ([None] * d1.size, [None] * d2.size)
+        placed = self._place(index, unique, mapped)
+        if isinstance(placed, str):
+            for c, (d1, d2) in self._dets.items():
+                if d1.size + d2.size:
+                    out.unresolved[c] = (
+                        f"{d1.size + d2.size} detection(s) not associated: movement {placed}"
+                    )
+            out.n_hypotheses = sum(len(h) for h in self.hypotheses.values())
+            return out
+        for _ in range(2):  # placed from the unique landmarks, then with the named ones too
+            pose, pos_std = placed
+            out = self._assign_named(index, pose, pos_std, mapped)
+            both = tuple(
+                {**u, **b}
+                for u, b in zip(unique, (out.bearings_o1_rad, out.bearings_o2_rad), strict=True)
+            )
+            if not (out.bearings_o1_rad or out.bearings_o2_rad):
+                break
+            known = {
+                **{n: LandmarkEstimate(h.point_fl, h.cov_fl) for n, h in self.unmapped.items()},
+                **mapped,
+            }
+            again = self._place(index, (both[0], both[1]), known)
+            if isinstance(again, str):
+                break
+            placed = again
+        out.n_hypotheses = sum(len(h) for h in self.hypotheses.values())
+        return out
+
+    def _assign_named(
+        self, index: int, pose: MovementPose, pos_std: float, mapped: Mapping[str, LandmarkEstimate]
+    ) -> MovementAssociation:
+        out = MovementAssociation(index, pose=pose)
+        origins = (pose.o1_fl, pose.o2_fl)
+        for c, dets in self._dets.items():
+            out.names[c] = ([None] * dets[0].size, [None] * dets[1].size)
+            if dets[0].size + dets[1].size == 0:
+                continue
+            self._free[c] = self._class(c, dets, origins, pose.heading_rad, pos_std**2, mapped, out)
+        return out
+
+    def hypothesize(
+        self,
+        out: MovementAssociation,
+        pose: MovementPose | None,
+        mapped: Mapping[str, LandmarkEstimate],
+    ) -> None:
+        """Grow, start, confirm and drop hypotheses with this movement's free detections.
+
+        ``pose`` is the movement as the estimator placed it (None: not placed; then the
+        association's own placement is used, if any), ``mapped`` the estimator's map after it.
+        Landmarks named now are in
+        ``out.confirmed`` and their bearings in ``out.history``.
+        """
+        pose = pose or out.pose
+        if pose is None:
+            return
+        self._last = (out.index, pose)
+        origins = (pose.o1_fl, pose.o2_fl)
+        index = out.index
+        for c, dets in self._dets.items():
+            for end in (0, 1):
+                for j, name in enumerate(out.names[c][end]):
+                    if name is not None and name in self.unmapped:
+                        ray = self._ray(
+                            index, end, j, float(dets[end][j]), origins[end], pose.heading_rad
+                        )
+                        self.unmapped[name].rays.append(ray)
+            for name in self.named[c]:
+                h = self.unmapped.get(name)
+                refit = h and fit(c, h.rays, self.eps_rad, self.sigma_rad)
+                if refit:
+                    self.unmapped[name] = refit
+            free = [list(f) for f in self._free[c]]
+            if not self.hypotheses[c] and not free[0] and not free[1]:
+                continue
+            free = self._grow(c, dets, free, origins, pose.heading_rad, index)
+            self._birth(c, dets, free, origins, pose.heading_rad, index)
+            self._confirm(c, out, mapped)
+            left = [f"{len(f)} at {w}" for f, w in zip(free, ("O1", "O2"), strict=True) if f]
+            if left:
+                out.unresolved.setdefault(
+                    f"{c} unexplained",
+                    f"{', '.join(left)} detection(s) of {c} explained by no named landmark "
+                    f"({len(self.hypotheses[c])} hypothesis(es) of {c} open)",
+                )
+        out.n_hypotheses = sum(len(h) for h in self.hypotheses.values())
+
+    def _known(
+        self, label: str, mapped: Mapping[str, LandmarkEstimate]
+    ) -> list[tuple[str, LandmarkEstimate]]:
+        out = []
+        for name in self.named[label]:
+            if name in mapped:
+                self.unmapped.pop(name, None)
+                out.append((name, mapped[name]))
+            elif name in self.unmapped:
+                h = self.unmapped[name]
+                out.append((name, LandmarkEstimate(h.point_fl, h.cov_fl)))
+        return out
+
+    def _predict(
+        self,
+        points: NDArray[np.float64],
+        covs: NDArray[np.float64],
+        origin: NDArray[np.float64],
+        heading: float,
+        pos_var: float,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        return predict_bearings(
+            origin,
+            heading,
+            points,
+            covs,
+            origin_var_fl=pos_var,
+            bearing_var_rad=2.0 * self.sigma_rad**2,
+        )
+
+    def _class(
+        self,
+        label: str,
+        dets: tuple[NDArray[np.float64], NDArray[np.float64]],
+        origins: tuple[NDArray[np.float64], NDArray[np.float64]],
+        heading: float,
+        pos_var: float,
+        mapped: Mapping[str, LandmarkEstimate],
+        out: MovementAssociation,
+    ) -> tuple[list[int], list[int]]:
+        """Assign the class's detections to its named landmarks; the detections left free."""
+        known = self._known(label, mapped)
+        free: list[list[int]] = []
+        for end in (0, 1):
+            det = dets[end]
+            where = "O1" if end == 0 else "O2"
+            if not known:
+                free.append(list(range(det.size)))
+                continue
+            pts = np.array([e.mean_fl for _, e in known])
+            covs = np.array([e.cov_fl for _, e in known])
+            pred, std = self._predict(pts, covs, origins[end], heading, pos_var)
+            vague = std > MAX_PRED_STD_EPS * self.eps_rad
+            for k in np.flatnonzero(vague):
+                out.unresolved[f"{known[k][0]}@{where}"] = (
+                    f"predicted bearing too uncertain to associate (std {_deg(float(std[k]))})"
+                )
+            sharp = np.flatnonzero(~vague)
+            pred, std = pred[sharp], std[sharp]
+            usable = [known[i] for i in sharp]
+            a = assign(pred, std, det)
+            bmap = out.bearings_o1_rad if end == 0 else out.bearings_o2_rad
+            for i, j in a.pairs:
+                bmap[usable[i][0]] = float(det[j])
+                out.names[label][end][j] = usable[i][0]
+            for i in a.missing:
+                out.not_visible[f"{usable[i][0]}@{where}"] = (
+                    f"predicted at {_deg(float(pred[i]))}, not detected (hidden or out of range)"
+                )
+            if a.contested_landmarks or a.contested_detections:
+                out.unresolved[f"{label}@{where}"] = _contested_text(a, usable, det)
+            free.append(list(a.unexplained))
+        return free[0], free[1]
+
+    def _ray(
+        self, index: int, end: int, j: int, b: float, origin: NDArray[np.float64], heading: float
+    ) -> Ray:
+        return Ray(index, end, j, b, (float(origin[0]), float(origin[1])), heading + b)
+
+    def _grow(
+        self,
+        label: str,
+        dets: tuple[NDArray[np.float64], ...],
+        free: list[list[int]],
+        origins: tuple[NDArray[np.float64], NDArray[np.float64]],
+        heading: float,
+        index: int,
+    ) -> list[list[int]]:
+        """Add rays to hypotheses from free detections; count misses; drop stale ones."""
+        hyps = self.hypotheses[label]
+        used: list[set[int]] = [set(), set()]
+        if hyps:
+            pts = np.array([h.point_fl for h in hyps])
+            covs = np.array([h.cov_fl for h in hyps])
+            for end in (0, 1):
+                cand = free[end]
+                pred, std = self._predict(pts, covs, origins[end], heading, 0.0)
+                # each hypothesis on its own: rivals share detections until one is confirmed
+                d2 = (wrap_rad(dets[end][cand][None, :] - pred[:, None]) / std[:, None]) ** 2
+                inside = d2 <= GATE_CHI2
+                for i, h in enumerate(hyps):
+                    hits = np.flatnonzero(inside[i])
+                    if hits.size == 1:
+                        j = cand[int(hits[0])]
+                        h.rays.append(
+                            self._ray(index, end, j, float(dets[end][j]), origins[end], heading)
+                        )
+                        h.keys.add((index, end, j))
+                    elif hits.size == 0:
+                        h.misses += 1
+                used[end].update(cand[j] for j in np.flatnonzero(inside.any(axis=0)))
+            kept = []
+            for h in hyps:
+                if h.misses >= MAX_MISSES or index - h.born > MAX_AGE:
+                    continue
+                refit = fit(label, h.rays, self.eps_rad, self.sigma_rad)
+                if refit is None:
+                    continue
+                refit.misses, refit.born = h.misses, h.born
+                kept.append(refit)
+            self.hypotheses[label] = kept
+        return [[j for j in free[end] if j not in used[end]] for end in (0, 1)]
+
+    def _birth(
+        self,
+        label: str,
+        dets: tuple[NDArray[np.float64], ...],
+        free: list[list[int]],
+        origins: tuple[NDArray[np.float64], NDArray[np.float64]],
+        heading: float,
+        index: int,
+    ) -> None:
+        """One hypothesis per pairing of free detections at O1 and O2 whose rays meet."""
+        for i in free[0]:
+            r1 = self._ray(index, 0, i, float(dets[0][i]), origins[0], heading)
+            for j in free[1]:
+                r2 = self._ray(index, 1, j, float(dets[1][j]), origins[1], heading)
+                h = fit(label, [r1, r2], self.eps_rad, self.sigma_rad)
+                if h is not None:
+                    self.hypotheses[label].append(h)
+
+    def _confirm(
+        self, label: str, out: MovementAssociation, mapped: Mapping[str, LandmarkEstimate]
+    ) -> None:
+        """Name hypotheses seen often enough, within the class's catalog count; drop those
+        that are a named landmark seen again (its detection fell outside its gate)."""
+        named = self._known(label, mapped)
+        kept = []
+        for h in self.hypotheses[label]:
+            same = [
+                n
+                for n, e in named
+                if _chi2(h.point_fl - e.mean_fl, h.cov_fl + e.cov_fl) <= SAME_CHI2
+            ]
+            if not same:
+                kept.append(h)
+        self.hypotheses[label] = kept
+        ready = [
+            h
+            for h in self.hypotheses[label]
+            if _positions(h) >= CONFIRM_POSITIONS and len(h.movements) >= CONFIRM_MOVEMENTS
+        ]
+        ready.sort(key=lambda h: (-_positions(h), h.rms_rad))
+        taken: set[tuple[int, int, int]] = set()
+        for h in ready:
+            rivals = [
+                o
+                for o in self.hypotheses[label]
+                if o is not h and o.keys & h.keys and _rivals(o, h)
+            ]
+            if h.keys & taken or rivals:
+                continue  # its pairing is still disputed: wait for later movements
+            taken |= h.keys
+            if len(self.named[label]) >= self.capacity[label]:
+                out.unresolved[f"{label} beyond catalog"] = (
+                    f"a landmark of {label} fits {len(h.rays)} keyframes at "
+                    f"({h.point_fl[0]:.2f}, {h.point_fl[1]:.2f}) FL but the catalog has "
+                    f"{self.capacity[label]} of {label}, all named; not mapped"
+                )
+                continue
+            name = slot_name(label, len(self.named[label]) + 1)
+            self.named[label].append(name)
+            self.unmapped[name] = h
+            out.confirmed.append(name)
+            out.history[name] = [(r.movement, r.end, r.bearing_rad) for r in h.rays]
+            for r in h.rays:
+                if r.movement == out.index:
+                    out.names[label][r.end][r.detection] = name
+        self.hypotheses[label] = [h for h in self.hypotheses[label] if not h.keys & taken]
+
+
+def _place_chained(
+    s: Sightings, o1_fl: NDArray[np.float64], sigma_rad: float
+) -> tuple[MovementPose, float] | None:
+    """A movement that starts where the last one ended (the robot turns in place): heading
+    from the bearings at O1, length from those at O2 (weighted least squares along the
+    heading); None when the bearings at O2 do not fix the length."""
+    at1, at2 = s.end == 0, s.end == 1
+    d1 = s.points_fl[at1] - o1_fl
+    ang = np.arctan2(d1[:, 1], d1[:, 0]) - s.bearings_rad[at1]
+    heading = math.atan2(float(np.sin(ang).sum()), float(np.cos(ang).sum()))
+    u = np.array([math.cos(heading), math.sin(heading)])
+    p2 = s.points_fl[at2]
+    dirs = heading + s.bearings_rad[at2]
+    n = np.column_stack((-np.sin(dirs), np.cos(dirs)))
+    w = 1.0 / np.maximum(((p2 - o1_fl) ** 2).sum(axis=1), 1e-9)
+    nu = n @ u
+    den = float((w * nu**2).sum())
+    if den < 1e-6 * float(w.sum()):
+        return None
+    t = -float((w * nu * ((o1_fl - p2) * n).sum(axis=1)).sum()) / den
+    if not t > 1e-3:
+        return None
+    pos_std = sigma_rad / math.sqrt(den)
+    return MovementPose(np.asarray(o1_fl, np.float64), heading, t), pos_std
+
+
+def _positions(h: Hypothesis) -> int:
+    """Keyframe positions of a hypothesis's rays further apart than :data:`DISTINCT_FL`."""
+    kept: list[tuple[float, float]] = []
+    for r in h.rays:
+        if all(math.dist(r.origin_fl, o) > DISTINCT_FL for o in kept):
+            kept.append(r.origin_fl)
+    return len(kept)
+
+
+def _rivals(o: Hypothesis, h: Hypothesis) -> bool:
+    """Whether ``o`` still disputes ``h`` (see :data:`RIVAL_LEAD`, :data:`RIVAL_RMS_RATIO`)."""
+    po, ph = _positions(o), _positions(h)
+    if po + RIVAL_LEAD <= ph:
+        return False
+    return not (po <= ph and o.rms_rad >= RIVAL_RMS_RATIO * h.rms_rad)
+
+
+def _chi2(d: NDArray[np.float64], cov: NDArray[np.float64]) -> float:
+    return float(d @ np.linalg.solve(cov + 1e-12 * np.eye(2), d))
+
+
+def _contested_text(
+    a: Assignment, known: list[tuple[str, LandmarkEstimate]], det: NDArray[np.float64]
+) -> str:
+    lms = ", ".join(known[i][0] for i in a.contested_landmarks) or "no landmark"
+    bs = ", ".join(_deg(float(det[j])) for j in a.contested_detections) or "none"
+    return (
+        f"{lms}: several plausible detections or overlapping predictions (detections at {bs}); "
+        "not used"
+    )

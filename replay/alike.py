@@ -1,0 +1,89 @@
+"""Landmarks that look alike in the stages: the runner's side of :mod:`pipeline.association`.
+
+:class:`AlikeLandmarks` turns a movement's keyframe detections into what the associator takes
+(bearings of landmarks with a class of their own, blobs per shared class), gives the estimator
+the named landmarks' bearings, and after the estimator has placed the movement lets the
+associator grow its hypotheses and hands the estimator the earlier bearings of landmarks named
+now (:meth:`pipeline.joint.JointSlam.add_history`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from data_schemas.session import Session, shared_classes
+from pipeline.association import Associator, MovementAssociation
+from pipeline.bearings import Detection
+from pipeline.estimators import Estimator
+from pipeline.joint.geometry import MovementPose
+from pipeline.slam import MovementObservation, MovementResult
+
+
+class AlikeLandmarks:
+    """Association for one run (see the module docstring); ``classes`` is label -> catalog names."""
+
+    def __init__(self, session: Session) -> None:
+        self.classes = shared_classes(session.landmarks)
+        self.alike = {n for names in self.classes.values() for n in names}
+        self.associator = Associator(
+            {label: len(names) for label, names in self.classes.items()},
+            session.reference,
+            vision_error_rad=session.vision_error_rad,
+        )
+
+    def landmarks(self, catalog: Sequence[str]) -> list[str]:
+        """What the estimator maps: catalog landmarks of their own class, then ``red#k`` names."""
+        return [n for n in catalog if n not in self.alike] + self.associator.names
+
+    def observe(
+        self,
+        index: int,
+        detections: tuple[Mapping[str, Detection], Mapping[str, Detection]],
+        turn_rad: float | None,
+        estimator: Estimator,
+    ) -> tuple[MovementObservation, MovementAssociation]:
+        """The movement's observation for the estimator, named landmarks included."""
+        unique = tuple(
+            {
+                n: d.bearing_rad
+                for n, d in dets.items()
+                if n not in self.alike and d.bearing_rad is not None
+            }
+            for dets in detections
+        )
+        blobs = tuple(
+            {
+                label: [b.bearing_rad for b in dets[names[0]].blobs]
+                for label, names in self.classes.items()
+            }
+            for dets in detections
+        )
+        assoc = self.associator.associate(
+            index, (unique[0], unique[1]), (blobs[0], blobs[1]), estimator.estimates
+        )
+        obs = MovementObservation(
+            index,
+            {**unique[0], **assoc.bearings_o1_rad},
+            {**unique[1], **assoc.bearings_o2_rad},
+            turn_rad,
+        )
+        return obs, assoc
+
+    def after(
+        self, assoc: MovementAssociation, result: MovementResult, estimator: Estimator
+    ) -> None:
+        """Grow the hypotheses with the movement as the estimator placed it; name confirmed ones."""
+        pose = None
+        if result.status == "ok" and result.o1_fl is not None and result.o2_fl is not None:
+            o1 = np.asarray(result.o1_fl, np.float64).reshape(-1, 2).mean(axis=0)
+            o2 = np.asarray(result.o2_fl, np.float64).reshape(-1, 2).mean(axis=0)
+            d = o2 - o1
+            pose = MovementPose(o1, math.atan2(d[1], d[0]), max(float(np.hypot(*d)), 1e-6))
+        self.associator.hypothesize(assoc, pose, estimator.estimates)
+        add_history = getattr(estimator, "add_history", None)
+        for name, bearings in assoc.history.items():
+            if add_history is not None:
+                add_history(name, bearings)

@@ -1,0 +1,126 @@
+"""Association over synthetic bearings (no images): ``n`` identical landmarks of class
+``blue`` and a distinct reference pair, the joint estimator, the truth of every detection."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from pipeline.association import Associator, MovementAssociation
+from pipeline.estimators import make_estimator
+from pipeline.joint.geometry import MovementPose
+from pipeline.slam import MovementObservation
+from pipeline.synthetic import simulate_bearings
+
+EPS = math.radians(3.0)
+ARENA_M = (1.6, 1.2)
+REFERENCE_M = ((0.55, 0.6), (1.05, 0.6))
+#: hide(movement, end, landmark) -> True drops that landmark's blob from the keyframe
+Hide = Callable[[int, int, str], bool]
+
+
+@dataclass
+class SyntheticRun:
+    """What association did on one synthetic run, with the truth to score it."""
+
+    associator: Associator
+    results: list[MovementAssociation] = field(default_factory=list)
+    given: list[tuple[int, int, str, str]] = field(default_factory=list)  # move, end, name, true
+    estimates_fl: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    truth_fl: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    unit_m: float = 1.0
+    seconds: float = 0.0
+
+    def matched(self) -> dict[str, str]:
+        """``blue#k`` -> true landmark: nearest, one-to-one."""
+        names = sorted(self.estimates_fl)
+        trues = sorted(t for t in self.truth_fl if t.startswith("B"))
+        if not names:
+            return {}
+        cost = np.array(
+            [
+                [float(np.hypot(*(self.estimates_fl[n] - self.truth_fl[t]))) for t in trues]
+                for n in names
+            ]
+        )
+        rows, cols = linear_sum_assignment(cost)
+        return {names[r]: trues[c] for r, c in zip(rows, cols, strict=True)}
+
+    def errors_m(self) -> dict[str, float]:
+        return {
+            n: float(np.hypot(*(self.estimates_fl[n] - self.truth_fl[t]))) * self.unit_m
+            for n, t in self.matched().items()
+        }
+
+    def correct_share(self) -> float:
+        m = self.matched()
+        ok = sum(1 for *_, name, true in self.given if m.get(name) == true)
+        return ok / max(len(self.given), 1)
+
+
+def layout(
+    n: int, rng: np.random.Generator, spacing_m: float = 0.15
+) -> dict[str, tuple[float, float]]:
+    """The reference pair and ``n`` points at least ``spacing_m`` apart in the arena."""
+    lms = {"L1": REFERENCE_M[0], "L2": REFERENCE_M[1]}
+    while len(lms) < n + 2:
+        p = (float(rng.uniform(0.1, ARENA_M[0] - 0.1)), float(rng.uniform(0.1, ARENA_M[1] - 0.1)))
+        if all(math.dist(p, q) >= spacing_m for q in lms.values()):
+            lms[f"B{len(lms) - 1}"] = p
+    return lms
+
+
+def run_synthetic(
+    n: int, seed: int, *, moves: int = 20, capacity: int | None = None, hide: Hide | None = None
+) -> SyntheticRun:
+    """``moves`` movements; the catalog says ``capacity`` (default ``n``) blue landmarks."""
+    import time
+
+    rng = np.random.default_rng(seed)
+    lms = layout(n, rng)
+    sim = simulate_bearings(
+        moves, rng, landmarks_world=lms, arena_m=ARENA_M, move_m=(0.2, 0.4), clearance_m=0.08
+    )
+    assoc = Associator({"blue": capacity or n}, ("L1", "L2"), vision_error_rad=EPS)
+    slam = make_estimator(
+        "joint", ["L1", "L2", *assoc.names], ("L1", "L2"), vision_error_rad=EPS, rng=rng
+    )
+    out = SyntheticRun(assoc, truth_fl=sim.truth_fl(("L1", "L2")), unit_m=math.dist(*REFERENCE_M))
+    tick = time.perf_counter()
+    for obs in sim.observations:
+        ends = (obs.bearings_o1_rad, obs.bearings_o2_rad)
+        unique = tuple({k: v for k, v in b.items() if k[0] == "L"} for b in ends)
+        seen = [
+            [(k, v) for k, v in b.items() if k[0] == "B" and not (hide and hide(obs.index, e, k))]
+            for e, b in enumerate(ends)
+        ]
+        for s in seen:
+            rng.shuffle(s)  # blobs come in no particular order
+        blobs = tuple({"blue": [v for _, v in s]} for s in seen)
+        a = assoc.associate(obs.index, (unique[0], unique[1]), (blobs[0], blobs[1]), slam.estimates)
+        res = slam.process_movement(
+            MovementObservation(
+                obs.index, {**unique[0], **a.bearings_o1_rad}, {**unique[1], **a.bearings_o2_rad}
+            )
+        )
+        pose = None
+        if res.status == "ok" and res.o1_fl is not None and res.o2_fl is not None:
+            o1, o2 = res.o1_fl.mean(axis=0), res.o2_fl.mean(axis=0)
+            d = o2 - o1
+            pose = MovementPose(o1, math.atan2(d[1], d[0]), float(np.hypot(*d)))
+        assoc.hypothesize(a, pose, slam.estimates)
+        for name, hist in a.history.items():
+            slam.add_history(name, hist)  # type: ignore[attr-defined]
+        out.results.append(a)
+        for e in (0, 1):
+            for j, name in enumerate(a.names.get("blue", ([], []))[e]):
+                if name is not None and name not in a.confirmed:
+                    out.given.append((obs.index, e, name, seen[e][j][0]))
+    out.seconds = time.perf_counter() - tick
+    out.estimates_fl = {k: e.mean_fl for k, e in slam.estimates.items() if "#" in k}
+    return out

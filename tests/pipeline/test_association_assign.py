@@ -1,0 +1,82 @@
+"""Gated one-to-one assignment: clear matches, refusals to guess, occlusion as "not visible"."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.association import assign, predict_bearings, ray_point_cov
+
+DEG = math.pi / 180.0
+
+
+def test_clear_predictions_are_matched_one_to_one_in_any_order() -> None:
+    rng = np.random.default_rng(1)
+    pred = np.radians([-150.0, -60.0, 10.0, 95.0, 170.0])
+    for _ in range(50):
+        order = rng.permutation(5)
+        det = pred[order] + rng.normal(0.0, 1.0 * DEG, 5)
+        a = assign(pred, np.full(5, 2.0 * DEG), det)
+        assert sorted(a.pairs) == sorted((int(order[j]), j) for j in range(5))
+        assert not (a.missing or a.unexplained or a.contested_landmarks)
+
+
+def test_seam_does_not_break_a_match() -> None:
+    a = assign(np.radians([179.5]), np.array([2.0 * DEG]), np.radians([-179.0]))
+    assert a.pairs == [(0, 0)]
+
+
+def test_two_detections_in_one_gate_are_contested_not_forced() -> None:
+    a = assign(np.radians([30.0]), np.array([3.0 * DEG]), np.radians([27.0, 33.5]))
+    assert a.pairs == [] and a.contested_landmarks == [0]
+    assert sorted(a.contested_detections) == [0, 1]
+
+
+def test_one_detection_between_two_overlapping_landmarks_is_not_given_to_either() -> None:
+    # one landmark hidden behind the other: a single blob where both are predicted
+    a = assign(np.radians([40.0, 41.0]), np.full(2, 2.0 * DEG), np.radians([40.6]))
+    assert a.pairs == []
+    assert sorted(a.contested_landmarks) == [0, 1] and a.contested_detections == [0]
+
+
+def test_missing_and_unexplained_are_reported_apart() -> None:
+    a = assign(np.radians([0.0, 90.0]), np.full(2, 2.0 * DEG), np.radians([0.5, -120.0]))
+    assert a.pairs == [(0, 0)] and a.missing == [1] and a.unexplained == [1]
+
+
+def test_a_crowded_group_keeps_the_pairs_every_alternative_rejects() -> None:
+    # landmark 0 sees a clear detection; landmark 1's gate also reaches it, its own is far off
+    pred = np.radians([0.0, 6.0])
+    a = assign(pred, np.full(2, 2.0 * DEG), np.radians([0.2, 6.3, 3.1]))
+    assert a.pairs == []  # 3.1 deg sits in both gates: both landmarks contested
+    b = assign(pred, np.full(2, 1.0 * DEG), np.radians([0.2, 6.3]))
+    assert b.pairs == [(0, 0), (1, 1)]
+
+
+def test_predicted_std_grows_with_the_landmark_covariance_and_shrinks_with_range() -> None:
+    pts = np.array([[1.0, 0.0], [3.0, 0.0]])
+    covs = np.array([np.eye(2) * 0.01, np.eye(2) * 0.01])
+    b, std = predict_bearings(np.zeros(2), 0.0, pts, covs)
+    assert np.allclose(b, 0.0)
+    assert math.isclose(std[0], 0.1, rel_tol=1e-9) and math.isclose(std[1], 0.1 / 3, rel_tol=1e-9)
+    _, std2 = predict_bearings(np.zeros(2), 0.0, pts, covs, bearing_var_rad=0.01)
+    assert np.all(std2 > std)
+
+
+def test_ray_point_cov_matches_the_spread_of_noisy_intersections() -> None:
+    rng = np.random.default_rng(4)
+    origins = np.array([[0.0, 0.0], [1.0, 0.0]])
+    point = np.array([0.4, 1.2])
+    sigma = 0.5 * DEG
+    cov = ray_point_cov(point, origins, sigma)
+    d = point - origins
+    base = np.arctan2(d[:, 1], d[:, 0])
+    fixes = []
+    for _ in range(4000):
+        ang = base + rng.normal(0.0, sigma, 2)
+        u = np.column_stack((np.cos(ang), np.sin(ang)))
+        t = np.linalg.solve(np.column_stack((u[0], -u[1])), origins[1] - origins[0])
+        fixes.append(origins[0] + t[0] * u[0])
+    emp = np.cov(np.array(fixes).T)
+    assert np.linalg.norm(emp - cov) <= 0.1 * np.linalg.norm(cov)

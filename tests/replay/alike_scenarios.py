@@ -1,0 +1,61 @@
+"""Scenarios of landmarks that look alike: ``n`` identical blue landmarks and a distinct
+reference pair (red L1, green L2), for association tests and measurements."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+ARENA_M = (1.6, 1.2)
+REFERENCE_M = ((0.55, 0.6), (1.05, 0.6))
+START_M = (0.8, 0.3)
+CAMERAS: dict[str, dict[str, Any]] = {
+    "unwrapped": {"model": "unwrapped", "width": 960, "height": 160},
+    "omni": {"model": "omni", "width": 480, "height": 480},
+}
+
+
+def alike_scenario(
+    n: int, camera: str, *, layout_seed: int, moves: int = 20, spacing_m: float = 0.22
+) -> dict[str, Any]:
+    """Scenario JSON: ``n`` blue landmarks drawn from ``layout_seed`` at least ``spacing_m``
+    apart (and from the reference pair and the arena's walls), camera ``"unwrapped"`` or
+    ``"omni"``."""
+    rng = np.random.default_rng(layout_seed)
+    landmarks: list[dict[str, Any]] = [
+        {"name": "L1", "x": REFERENCE_M[0][0], "y": REFERENCE_M[0][1], "color": "red"},
+        {"name": "L2", "x": REFERENCE_M[1][0], "y": REFERENCE_M[1][1], "color": "green"},
+    ]
+    points = [REFERENCE_M[0], REFERENCE_M[1]]
+    while len(points) < n + 2:
+        x, y = rng.uniform(0.12, ARENA_M[0] - 0.12), rng.uniform(0.12, ARENA_M[1] - 0.12)
+        clear = math.dist((x, y), START_M) >= spacing_m / 2  # not on the robot's start
+        if clear and all(math.dist((x, y), p) >= spacing_m for p in points):
+            points.append((x, y))
+            landmarks.append(
+                {"name": f"B{len(points) - 2}", "x": round(x, 4), "y": round(y, 4), "color": "blue"}
+            )
+    for lm in landmarks:
+        lm.update({"radius": 0.01, "height": 0.15})
+    return {
+        "arena": {"width": ARENA_M[0], "height": ARENA_M[1]},
+        "landmarks": landmarks,
+        "reference": ["L1", "L2"],
+        "camera": {
+            **CAMERAS[camera],
+            "bearing_noise_deg": 1.0,
+            "pixel_noise": 2.0,
+            "lighting": True,
+        },
+        "vision_error_deg": 3.0,
+        "trajectory": {
+            "start": [0.8, 0.3, 0.0],
+            "seed": layout_seed,
+            "moves": moves,
+            "distance": [0.2, 0.4],
+        },
+        "robot": {"radius": 0.03},
+        "description": f"{n} identical blue landmarks and a distinct reference pair ({camera})",
+    }

@@ -1,0 +1,123 @@
+"""Scoring association on simulated logs: which true landmark each associated bearing saw.
+
+A bearing given to ``blue#k`` at a keyframe is correct when it is within the bearing error
+bound eps of the true bearing (from the true keyframe; heading: the movement's true direction)
+of the true landmark :func:`replay.truth.match_truth` matches ``blue#k`` to: a blob where two
+landmarks line up is a correct bearing of either. ``n_nearest`` counts the stricter reading:
+that landmark is also the one of the class whose true bearing is nearest.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from data_schemas.angles import wrap_rad
+from data_schemas.session import shared_classes
+from replay.records import FrameRecord, MethodConfig, MovementRecord, RunInfo
+from replay.sinks.summary import SummarySink
+from replay.stages import run_log
+from replay.truth import match_truth
+
+
+@dataclass
+class Collect:
+    """A sink keeping the movement records."""
+
+    wants_all_frames: bool = False
+    wants_images: bool = False
+    run: RunInfo | None = None
+    records: list[MovementRecord] = field(default_factory=list)
+    frames: list[FrameRecord] = field(default_factory=list)
+
+    def start(self, run: RunInfo) -> None:
+        self.run = run
+
+    def frame(self, frame: FrameRecord) -> None:
+        if frame.keyframe is not None:
+            self.frames.append(frame)
+
+    def movement(self, record: MovementRecord) -> None:
+        self.records.append(record)
+
+    def finish(self) -> None:
+        pass
+
+
+@dataclass(frozen=True)
+class Score:
+    """Association and map figures of one run."""
+
+    n_correct: int
+    n_nearest: int
+    n_associated: int
+    n_detections: int
+    n_named: int
+    n_true: int
+    errors_m: dict[str, float]
+    matched: dict[str, str]
+    summary: dict[str, Any]
+
+    @property
+    def correct_share(self) -> float:
+        """Correct among the detections given a name."""
+        return self.n_correct / max(self.n_associated, 1)
+
+    @property
+    def wrong_share(self) -> float:
+        """Wrongly named among every keyframe detection of the class (the rest: correctly
+        named, or left unnamed and reported)."""
+        return (self.n_associated - self.n_correct) / max(self.n_detections, 1)
+
+
+def score_log(log: Path, method: MethodConfig | None = None) -> Score:
+    """Process ``log`` and score its association against the simulator's truth."""
+    collect, summary = Collect(), SummarySink()
+    run_log(log, method or MethodConfig(), [collect, summary])
+    assert collect.run is not None and collect.run.truth is not None
+    truth, session = collect.run.truth, collect.run.session
+    classes = shared_classes(session.landmarks)
+    last = next(r for r in reversed(collect.records) if r.ok)
+    means = {n: e.mean_fl for n, e in last.estimates.items() if "#" in n}
+    matched = match_truth(truth, means, classes)
+    members = {n: label for label, names in classes.items() for n in names}
+    eps = session.vision_error_rad
+    correct = nearest = associated = 0
+    for rec in collect.records:
+        if rec.truth_o1_world is None or rec.truth_o2_world is None:
+            continue
+        d = rec.truth_o2_world - rec.truth_o1_world
+        heading = math.atan2(d[1], d[0])
+        for name, pair in rec.bearings_rad.items():
+            if "#" not in name:
+                continue
+            label = name.rpartition("#")[0]
+            trues = [n for n, c in members.items() if c == label]
+            pts = np.array([truth.landmarks_world[n] for n in trues])
+            for origin, b in zip((rec.truth_o1_world, rec.truth_o2_world), pair, strict=True):
+                if b is None:
+                    continue
+                v = pts - origin
+                err = np.abs(wrap_rad(np.arctan2(v[:, 1], v[:, 0]) - heading - b))
+                associated += 1
+                own = matched.get(name)
+                correct += int(own is not None and err[trues.index(own)] <= eps)
+                nearest += int(trues[int(np.argmin(err))] == own)
+    errors = {n: truth.error_m(t, means[n]) for n, t in matched.items()}
+    firsts = [names[0] for names in classes.values()]
+    detections = sum(len(f.detections[n].blobs) for f in collect.frames for n in firsts)
+    return Score(
+        correct,
+        nearest,
+        associated,
+        detections,
+        len(means),
+        sum(len(v) for v in classes.values()),
+        errors,
+        matched,
+        summary.document,
+    )
