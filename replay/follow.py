@@ -13,8 +13,8 @@ from __future__ import annotations
 import os
 from collections.abc import Collection, Iterator
 from pathlib import Path
-from types import TracebackType
 
+from data_schemas.closing import Closing
 from data_schemas.errors import MissingMetadataError
 from data_schemas.mcap.follow import IDLE_TIMEOUT_S, FollowEnd, LogFollower
 from data_schemas.mcap.processable import check_calibration, check_channel
@@ -23,7 +23,7 @@ from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
 
 
-class FollowedLog:
+class FollowedLog(Closing):
     """A log followed while it grows (see the module docstring).
 
     Parameters
@@ -103,14 +103,3 @@ class FollowedLog:
     def close(self) -> None:
         """Close the file."""
         self._follower.close()
-
-    def __enter__(self) -> FollowedLog:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

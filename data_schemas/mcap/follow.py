@@ -23,7 +23,6 @@ import struct
 import time
 import zlib
 from collections.abc import Callable, Iterator
-from types import TracebackType
 from typing import Literal, NamedTuple
 
 from isal import isal_zlib
@@ -33,6 +32,7 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, breakup_chunk
 
+from data_schemas.closing import Closing
 from data_schemas.errors import LogError, NotMcapError
 from data_schemas.mcap.layout import MAGIC, RECORD_HEADER
 
@@ -57,7 +57,7 @@ class FollowedMessage(NamedTuple):
     message: Message
 
 
-class LogFollower:
+class LogFollower(Closing):
     """Read a growing MCAP log (see the module docstring).
 
     Parameters
@@ -170,17 +170,6 @@ class LogFollower:
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
-
-    def __enter__(self) -> LogFollower:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # ------------------------------------------------------------------ internals
     def _open(self) -> int:

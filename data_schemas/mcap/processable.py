@@ -18,7 +18,6 @@ import json
 import os
 from collections.abc import Collection, Container, Iterator
 from pathlib import Path
-from types import TracebackType
 from typing import IO
 
 from mcap.exceptions import McapError
@@ -26,6 +25,7 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.summary import Summary
 
+from data_schemas.closing import Closing
 from data_schemas.errors import (
     CorruptLogError,
     LogError,
@@ -103,7 +103,7 @@ def _summary(file: IO[bytes]) -> Summary | None:
         return None
 
 
-class ProcessableLog:
+class ProcessableLog(Closing):
     """A finished, undamaged log with valid session metadata (see module docstring).
 
     Parameters
@@ -325,14 +325,3 @@ class ProcessableLog:
         if self._index is not None:
             self._index.close()
         self._file.close()
-
-    def __enter__(self) -> ProcessableLog:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

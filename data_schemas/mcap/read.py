@@ -13,11 +13,11 @@ import io
 import os
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
-from types import TracebackType
 from typing import IO, Any
 
 from mcap.records import Channel, Message, Metadata, Schema
 
+from data_schemas.closing import Closing
 from data_schemas.codec import decode
 from data_schemas.errors import (
     CorruptLogError,
@@ -83,7 +83,7 @@ def corrupt_log_line(name: str, damage: list[Damage], advice: str) -> str:
     return f"{name} is corrupt: {damage[0].describe()}{more}; {advice}"
 
 
-class LogReader:
+class LogReader(Closing):
     """Stream a bearing-slam MCAP log in file order (one checking pass at open).
 
     Parameters
@@ -195,14 +195,3 @@ class LogReader:
 
     def close(self) -> None:
         """Nothing stays open between passes (kept for ``with`` blocks)."""
-
-    def __enter__(self) -> LogReader:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

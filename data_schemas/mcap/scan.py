@@ -30,7 +30,6 @@ import struct
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from types import TracebackType
 from typing import IO
 
 from isal import isal_zlib
@@ -52,6 +51,7 @@ from mcap.records import (
 )
 from mcap.stream_reader import get_chunk_data_stream
 
+from data_schemas.closing import Closing
 from data_schemas.errors import LogError, NotMcapError
 from data_schemas.mcap.layout import (
     CHUNK_FIELDS,
@@ -158,7 +158,7 @@ class _Pending:
     index: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
 
 
-class LogScan:
+class LogScan(Closing):
     """Scan one MCAP file (see module docstring); iterate :meth:`records` once.
 
     Parameters
@@ -321,17 +321,6 @@ class LogScan:
         """Release the file."""
         if isinstance(self._data, mmap.mmap):
             self._data.close()
-
-    def __enter__(self) -> LogScan:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # ------------------------------------------------------------------ framing
     def _is_closing_magic(self, pos: int) -> bool:

@@ -24,11 +24,11 @@ import contextlib
 import errno
 import sys
 from collections.abc import Callable
-from types import TracebackType
 from typing import Any, Protocol, cast
 
 import serial
 
+from data_schemas.closing import Closing
 from data_schemas.stamps import stamp_from_ns
 from recorder.clock import Clock
 from recorder.robot.base import MotionStatus, RobotConfig
@@ -140,7 +140,7 @@ def open_serial(config: RobotConfig) -> SerialPort:
     return cast(SerialPort, port)
 
 
-class KheperaRobot:
+class KheperaRobot(Closing):
     """A Khepera (II) over an open serial port; implements :class:`recorder.robot.base.Robot`.
 
     Parameters
@@ -194,17 +194,6 @@ class KheperaRobot:
     def config(self) -> RobotConfig:
         """Serial settings and geometry."""
         return self._config
-
-    def __enter__(self) -> KheperaRobot:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def close(self) -> None:
         """Close the port (idempotent)."""

@@ -35,11 +35,11 @@ import select
 import threading
 import tty
 from dataclasses import dataclass
-from types import TracebackType
 from typing import Literal, NamedTuple
 
 import numpy as np
 
+from data_schemas.closing import Closing
 from recorder.clock import Clock, SystemClock
 from recorder.robot.base import RobotConfig
 from recorder.robot.errors import RobotProtocolError
@@ -407,7 +407,7 @@ class FakeKhepera:
             return self._segments[i].pose(t)
 
 
-class PtyServer:
+class PtyServer(Closing):
     """Serve a :class:`FakeKhepera` on a new pseudo-terminal from a background thread.
 
     ``path`` (``/dev/pts/N``) is a real serial endpoint for pyserial. Request lines end with CR
@@ -432,17 +432,6 @@ class PtyServer:
     def disconnected(self) -> bool:
         """Whether the pty was closed (by a ``disconnect`` fault or :meth:`close`)."""
         return not self._pty_open
-
-    def __enter__(self) -> PtyServer:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     def close(self) -> None:
         """Stop the thread and close the pty (idempotent)."""
