@@ -90,6 +90,22 @@ class _Movement:
         return MovementObservation(self.index, ends[0], ends[1], self.turn_rad)
 
 
+@dataclass(frozen=True)
+class _Snapshot:
+    """The map's state before a movement (to roll back to when the movement breaks it)."""
+
+    placed: dict[int, _Movement]
+    waiting: dict[int, _Movement]
+    links: set[tuple[int, int]]
+    in_graph: set[str]
+    pending: dict[str, list[g.Bearing]]
+    rejected: set[g.Bearing]
+    estimates: dict[str, LandmarkEstimate]
+    noise: NoiseEstimate | None
+    sigma_model_rad: float
+    values: gtsam.Values
+
+
 class JointSlam:
     """Joint bearing-only SLAM over all movements (GTSAM iSAM2), initialized by the paper's filter.
 
@@ -616,6 +632,11 @@ class JointSlam:
 
     def _check(self, before: dict[str, LandmarkEstimate]) -> str:
         """Why the map looks diverged (empty if it does not)."""
+        return self._misfit(self.divergence_rms_rad) or self._jumped(before)
+
+    def _misfit(self, rms_limit_rad: float) -> str:
+        """Why the residuals are out of bounds: too many beyond :data:`REJECT_EPS` eps, or a
+        robust RMS over ``rms_limit_rad`` (empty if they are not)."""
         used, r = self._residuals()
         far = sum(
             1
@@ -625,10 +646,10 @@ class JointSlam:
         if far > max(1, MAX_REJECT_FRACTION * r.size):
             return f"{far} of {r.size} bearings more than {REJECT_EPS:g} eps from the map"
         noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
-        if noise.robust_rms_rad > self.divergence_rms_rad:
-            limit = math.degrees(self.divergence_rms_rad)
+        if noise.robust_rms_rad > rms_limit_rad:
+            limit = math.degrees(rms_limit_rad)
             return f"robust residual RMS {math.degrees(noise.robust_rms_rad):.2f} deg > {limit:.2f}"
-        return self._jumped(before)
+        return ""
 
     def _update_estimates(self) -> None:
         _, r = self._residuals()
@@ -675,6 +696,7 @@ class JointSlam:
         if obs.index in self._placed or obs.index in self._waiting:
             raise EstimationError(f"movement {obs.index} was already processed")
         m = _Movement(obs.index, obs.turn_rad, bearings)
+        snapshot = self._snapshot()
         self._waiting[obs.index] = m
         before = self.estimates
         placed: list[int] = []
@@ -703,6 +725,9 @@ class JointSlam:
             res.divergence = divergence
             self.reinitializations += 1
             self._rebuild(self._values_from_particles())
+            still = self._misfit(max(self.eps_rad, self.divergence_rms_rad))
+            if still:
+                return self._roll_back(res, snapshot, m, divergence, still)
         self._reject_outliers()
         self._update_estimates()
         res.estimates, res.noise = self.estimates, self.noise
@@ -712,6 +737,50 @@ class JointSlam:
             res.residuals_rad = self._movement_residuals(m)
         else:
             res.placement = ""
+        return res
+
+    def _snapshot(self) -> _Snapshot:
+        return _Snapshot(
+            dict(self._placed),
+            dict(self._waiting),
+            set(self._links),
+            set(self._in_graph),
+            {k: list(v) for k, v in self._pending.items()},
+            set(self._rejected),
+            dict(self._estimates),
+            self.noise,
+            self.sigma_model_rad,
+            gtsam.Values(self._values),
+        )
+
+    def _roll_back(
+        self,
+        res: JointMovementResult,
+        snap: _Snapshot,
+        m: _Movement,
+        divergence: str,
+        still: str,
+    ) -> JointMovementResult:
+        """The map as it was before movement ``m``, which is refused when there was a map;
+        without one, every movement waits for the bootstrap to try again with more."""
+        self._placed, self._waiting = dict(snap.placed), dict(snap.waiting)
+        self._links, self._in_graph = set(snap.links), set(snap.in_graph)
+        self._pending = {k: list(v) for k, v in snap.pending.items()}
+        self._rejected, self._estimates = set(snap.rejected), dict(snap.estimates)
+        self.noise, self.sigma_model_rad = snap.noise, snap.sigma_model_rad
+        self._staged.clear()
+        self._factor_of.clear()
+        if self._placed:
+            self._rebuild(snap.values)
+        else:
+            self._waiting[m.index] = m
+            self._isam, self._values = self._new_isam(), gtsam.Values()
+        res.status = (
+            f"skipped: the map diverged with it ({divergence}) and re-initialization from the "
+            f"particles did not fit ({still}); the map is kept as before it"
+        )
+        res.placement, res.also_placed = "", []
+        res.estimates, res.noise = self.estimates, self.noise
         return res
 
     def _movement_residuals(self, m: _Movement) -> dict[str, tuple[float | None, float | None]]:

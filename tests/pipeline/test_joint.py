@@ -175,6 +175,36 @@ def test_divergence_falls_back_to_the_particles() -> None:
         assert np.hypot(*(est.mean_fl - reference.estimates[name].mean_fl)) < 0.1 * std
 
 
+def test_a_map_that_stays_diverged_is_not_reported() -> None:
+    # 10 landmarks in 3 x 2 m; at the first two movements five of them are wrong detections at O1
+    # (random bearings): the bootstrap fits its median but not the rest, re-initialization from
+    # the particles cannot fix wrong bearings, so the movement is refused and nothing is output
+    rng = np.random.default_rng(5)
+    lms = {f"L{i + 1}": tuple(rng.uniform([0.1, 0.1], [2.9, 1.9])) for i in range(10)}
+    lms["L1"], lms["L2"] = (1.3, 1.0), (1.7, 1.0)
+    run = simulate_bearings(
+        6, rng, eps_rad=EPS, landmarks_world=lms, arena_m=(3.0, 2.0), move_m=(0.2, 0.5)
+    )
+    obs = list(run.observations)
+    for k in (0, 1):
+        wrong = {n: float(rng.uniform(-math.pi, math.pi)) for n in list(lms)[2:7]}
+        obs[k] = replace(obs[k], bearings_o1_rad={**obs[k].bearings_o1_rad, **wrong})
+    slam = _slam(run, PAPER_REFERENCE, 0)
+    results = []
+    for o in obs:
+        results.append(slam.process_movement(o))
+        if results[-1].status == "ok":  # whatever is reported fits its bearings
+            assert slam._misfit(EPS) == ""
+    refused = [r for r in results if r.divergence]
+    assert refused
+    for r in refused:
+        assert r.status.startswith("skipped: the map diverged with it")
+        assert "re-initialization from the particles did not fit" in r.status
+        assert r.placement == "" and r.estimates == {} and r.o1_fl.size == 0
+    assert slam.reinitializations == len(refused)
+    assert results[-1].status == "ok" and results[-1].estimates
+
+
 def test_landmark_jump_is_detected() -> None:
     run = simulate_bearings(10, np.random.default_rng(5), eps_rad=EPS)
     slam = _joint(run, PAPER_REFERENCE, 5)
