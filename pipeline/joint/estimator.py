@@ -72,6 +72,9 @@ REJECT_EPS = 2.0
 READMIT_EPS = 1.5
 #: More than this fraction of the bearings beyond REJECT_EPS eps: the map is wrong, not them.
 MAX_REJECT_FRACTION = 0.1
+#: A landmark with at least this many rejected bearings, and more rejected than kept, is put
+#: where its rays meet (its first estimate was wrong, not its bearings).
+RESEAT_MIN_REJECTED = 3
 
 
 @dataclass
@@ -179,6 +182,7 @@ class JointSlam:
         params.setRelinearizeThreshold(1e-3)
         params.relinearizeSkip = 1
         params.setFactorization("QR")
+        params.setOptimizationParams(gtsam.ISAM2DoglegParams())
         return gtsam.ISAM2(params)
 
     def _key(self, name: str) -> int:
@@ -396,6 +400,35 @@ class JointSlam:
         remove = [self._factor_of.pop(b) for b in out]
         self._rejected.update(out)
         self._update(graph, gtsam.Values(), remove)
+
+    def _reseat_landmarks(self) -> list[str]:
+        """Landmarks moved to where their rays meet, when most of their bearings were rejected
+        (the landmark is wrong, not its bearings: it entered from a poor first estimate); the
+        map is then rebuilt with those bearings back in."""
+        values = gtsam.Values(self._values)
+        moved = []
+        for name in sorted(self._in_graph - set(self.reference), key=self._lm_index.__getitem__):
+            own = [b for b in self._bearings() if b.landmark == name]
+            n_out = sum(1 for b in own if b in self._rejected)
+            if n_out < RESEAT_MIN_REJECTED or n_out <= len(own) - n_out:
+                continue
+            poses = [self._values.atPose2(g.pose_key(b.movement, b.end)) for b in own]
+            origins = np.array([(p.x(), p.y()) for p in poses], np.float64)
+            headings = np.array([p.theta() for p in poses], np.float64)
+            bearings = np.array([b.bearing_rad for b in own], np.float64)
+            fix = intersect_rays(origins, headings + bearings, REJECT_EPS * self.eps_rad)
+            if fix is None or fix.parallax_rad < MIN_RAY_PARALLAX_EPS * self.eps_rad:
+                continue
+            pts = np.repeat(fix.point_fl[None, :], len(own), axis=0)
+            r = wrap_rad(bearings - predicted_bearings(origins, headings, pts))
+            if int((np.abs(r) <= REJECT_EPS * self.eps_rad).sum()) <= len(own) - n_out:
+                continue
+            values.update(self._key(name), fix.point_fl)
+            self._rejected.difference_update(own)
+            moved.append(name)
+        if moved:
+            self._rebuild(values)
+        return moved
 
     def _place_waiting(self) -> list[int]:
         """Place every waiting movement the map can place now (again while any is placed)."""
@@ -729,6 +762,8 @@ class JointSlam:
             if still:
                 return self._roll_back(res, snapshot, m, divergence, still)
         self._reject_outliers()
+        if self._reseat_landmarks():
+            self._reject_outliers()
         self._update_estimates()
         res.estimates, res.noise = self.estimates, self.noise
         if obs.index in self._placed:
