@@ -482,9 +482,15 @@ class JointSlam:
         dof = n_bearings - (4 * len(guesses) - 2 * n_links + 2 * len(seeds))
         paper_frames = all(self._paper_frame(self._waiting[k].observation()) for k in guesses)
         if dof < (0 if paper_frames else BOOTSTRAP_DOF):
+            alone = (
+                "; one movement alone never has more: the map waits for another that sees "
+                "both reference landmarks from both ends"
+                if len(guesses) == 1
+                else ""
+            )
             return (
                 f"waiting for more bearings to start the map ({dof} more bearings than unknowns, "
-                f"need {BOOTSTRAP_DOF})"
+                f"need {BOOTSTRAP_DOF}{alone})"
             )
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         l1, l2 = self.reference
