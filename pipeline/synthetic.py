@@ -121,6 +121,24 @@ def simulate_bearings(
     return SimulatedRun(obs, np.array(o1s), np.array(o2s), np.array(heads), lms)
 
 
+def scatter_landmarks(
+    rng: np.random.Generator,
+    placed: Mapping[str, tuple[float, float]],
+    n_landmarks: int,
+    lo_m: tuple[float, float],
+    hi_m: tuple[float, float],
+    spacing_m: float,
+) -> dict[str, tuple[float, float]]:
+    """``placed`` plus landmarks ``L<k>`` drawn uniformly in the box ``lo_m``-``hi_m`` (world, m),
+    each more than ``spacing_m`` from the others, up to ``n_landmarks`` in all."""
+    pts = dict(placed)
+    while len(pts) < n_landmarks:
+        p = rng.uniform(lo_m, hi_m)
+        if all(math.dist(p, q) > spacing_m for q in pts.values()):
+            pts[f"L{len(pts) + 1}"] = (float(p[0]), float(p[1]))
+    return pts
+
+
 @dataclass(frozen=True)
 class Arena:
     """A randomly drawn arena for stress tests (world frame, m, deg).

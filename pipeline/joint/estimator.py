@@ -72,6 +72,9 @@ REJECT_EPS = 2.0
 READMIT_EPS = 1.5
 #: More than this fraction of the bearings beyond REJECT_EPS eps: the map is wrong, not them.
 MAX_REJECT_FRACTION = 0.1
+#: A landmark with at least this many rejected bearings, and more rejected than kept, is put
+#: where its rays meet (its first estimate was wrong, not its bearings).
+RESEAT_MIN_REJECTED = 3
 
 
 @dataclass
@@ -88,6 +91,22 @@ class _Movement:
         for b in self.bearings:
             ends[b.end][b.landmark] = b.bearing_rad
         return MovementObservation(self.index, ends[0], ends[1], self.turn_rad)
+
+
+@dataclass(frozen=True)
+class _Snapshot:
+    """The map's state before a movement (to roll back to when the movement breaks it)."""
+
+    placed: dict[int, _Movement]
+    waiting: dict[int, _Movement]
+    links: set[tuple[int, int]]
+    in_graph: set[str]
+    pending: dict[str, list[g.Bearing]]
+    rejected: set[g.Bearing]
+    estimates: dict[str, LandmarkEstimate]
+    noise: NoiseEstimate | None
+    sigma_model_rad: float
+    values: gtsam.Values
 
 
 class JointSlam:
@@ -163,6 +182,7 @@ class JointSlam:
         params.setRelinearizeThreshold(1e-3)
         params.relinearizeSkip = 1
         params.setFactorization("QR")
+        params.setOptimizationParams(gtsam.ISAM2DoglegParams())
         return gtsam.ISAM2(params)
 
     def _key(self, name: str) -> int:
@@ -381,6 +401,35 @@ class JointSlam:
         self._rejected.update(out)
         self._update(graph, gtsam.Values(), remove)
 
+    def _reseat_landmarks(self) -> list[str]:
+        """Landmarks moved to where their rays meet, when most of their bearings were rejected
+        (the landmark is wrong, not its bearings: it entered from a poor first estimate); the
+        map is then rebuilt with those bearings back in."""
+        values = gtsam.Values(self._values)
+        moved = []
+        for name in sorted(self._in_graph - set(self.reference), key=self._lm_index.__getitem__):
+            own = [b for b in self._bearings() if b.landmark == name]
+            n_out = sum(1 for b in own if b in self._rejected)
+            if n_out < RESEAT_MIN_REJECTED or n_out <= len(own) - n_out:
+                continue
+            poses = [self._values.atPose2(g.pose_key(b.movement, b.end)) for b in own]
+            origins = np.array([(p.x(), p.y()) for p in poses], np.float64)
+            headings = np.array([p.theta() for p in poses], np.float64)
+            bearings = np.array([b.bearing_rad for b in own], np.float64)
+            fix = intersect_rays(origins, headings + bearings, REJECT_EPS * self.eps_rad)
+            if fix is None or fix.parallax_rad < MIN_RAY_PARALLAX_EPS * self.eps_rad:
+                continue
+            pts = np.repeat(fix.point_fl[None, :], len(own), axis=0)
+            r = wrap_rad(bearings - predicted_bearings(origins, headings, pts))
+            if int((np.abs(r) <= REJECT_EPS * self.eps_rad).sum()) <= len(own) - n_out:
+                continue
+            values.update(self._key(name), fix.point_fl)
+            self._rejected.difference_update(own)
+            moved.append(name)
+        if moved:
+            self._rebuild(values)
+        return moved
+
     def _place_waiting(self) -> list[int]:
         """Place every waiting movement the map can place now (again while any is placed)."""
         placed: list[int] = []
@@ -433,9 +482,15 @@ class JointSlam:
         dof = n_bearings - (4 * len(guesses) - 2 * n_links + 2 * len(seeds))
         paper_frames = all(self._paper_frame(self._waiting[k].observation()) for k in guesses)
         if dof < (0 if paper_frames else BOOTSTRAP_DOF):
+            alone = (
+                "; one movement alone never has more: the map waits for another that sees "
+                "both reference landmarks from both ends"
+                if len(guesses) == 1
+                else ""
+            )
             return (
                 f"waiting for more bearings to start the map ({dof} more bearings than unknowns, "
-                f"need {BOOTSTRAP_DOF})"
+                f"need {BOOTSTRAP_DOF}{alone})"
             )
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         l1, l2 = self.reference
@@ -616,6 +671,11 @@ class JointSlam:
 
     def _check(self, before: dict[str, LandmarkEstimate]) -> str:
         """Why the map looks diverged (empty if it does not)."""
+        return self._misfit(self.divergence_rms_rad) or self._jumped(before)
+
+    def _misfit(self, rms_limit_rad: float) -> str:
+        """Why the residuals are out of bounds: too many beyond :data:`REJECT_EPS` eps, or a
+        robust RMS over ``rms_limit_rad`` (empty if they are not)."""
         used, r = self._residuals()
         far = sum(
             1
@@ -625,10 +685,10 @@ class JointSlam:
         if far > max(1, MAX_REJECT_FRACTION * r.size):
             return f"{far} of {r.size} bearings more than {REJECT_EPS:g} eps from the map"
         noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
-        if noise.robust_rms_rad > self.divergence_rms_rad:
-            limit = math.degrees(self.divergence_rms_rad)
+        if noise.robust_rms_rad > rms_limit_rad:
+            limit = math.degrees(rms_limit_rad)
             return f"robust residual RMS {math.degrees(noise.robust_rms_rad):.2f} deg > {limit:.2f}"
-        return self._jumped(before)
+        return ""
 
     def _update_estimates(self) -> None:
         _, r = self._residuals()
@@ -693,6 +753,7 @@ class JointSlam:
         if obs.index in self._placed or obs.index in self._waiting:
             raise EstimationError(f"movement {obs.index} was already processed")
         m = _Movement(obs.index, obs.turn_rad, bearings)
+        snapshot = self._snapshot()
         self._waiting[obs.index] = m
         before = self.estimates
         placed: list[int] = []
@@ -721,7 +782,12 @@ class JointSlam:
             res.divergence = divergence
             self.reinitializations += 1
             self._rebuild(self._values_from_particles())
+            still = self._misfit(max(self.eps_rad, self.divergence_rms_rad))
+            if still:
+                return self._roll_back(res, snapshot, m, divergence, still)
         self._reject_outliers()
+        if self._reseat_landmarks():
+            self._reject_outliers()
         self._update_estimates()
         res.estimates, res.noise = self.estimates, self.noise
         if obs.index in self._placed:
@@ -730,6 +796,50 @@ class JointSlam:
             res.residuals_rad = self._movement_residuals(m)
         else:
             res.placement = ""
+        return res
+
+    def _snapshot(self) -> _Snapshot:
+        return _Snapshot(
+            dict(self._placed),
+            dict(self._waiting),
+            set(self._links),
+            set(self._in_graph),
+            {k: list(v) for k, v in self._pending.items()},
+            set(self._rejected),
+            dict(self._estimates),
+            self.noise,
+            self.sigma_model_rad,
+            gtsam.Values(self._values),
+        )
+
+    def _roll_back(
+        self,
+        res: JointMovementResult,
+        snap: _Snapshot,
+        m: _Movement,
+        divergence: str,
+        still: str,
+    ) -> JointMovementResult:
+        """The map as it was before movement ``m``, which is refused when there was a map;
+        without one, every movement waits for the bootstrap to try again with more."""
+        self._placed, self._waiting = dict(snap.placed), dict(snap.waiting)
+        self._links, self._in_graph = set(snap.links), set(snap.in_graph)
+        self._pending = {k: list(v) for k, v in snap.pending.items()}
+        self._rejected, self._estimates = set(snap.rejected), dict(snap.estimates)
+        self.noise, self.sigma_model_rad = snap.noise, snap.sigma_model_rad
+        self._staged.clear()
+        self._factor_of.clear()
+        if self._placed:
+            self._rebuild(snap.values)
+        else:
+            self._waiting[m.index] = m
+            self._isam, self._values = self._new_isam(), gtsam.Values()
+        res.status = (
+            f"skipped: the map diverged with it ({divergence}) and re-initialization from the "
+            f"particles did not fit ({still}); the map is kept as before it"
+        )
+        res.placement, res.also_placed = "", []
+        res.estimates, res.noise = self.estimates, self.noise
         return res
 
     def _movement_residuals(self, m: _Movement) -> dict[str, tuple[float | None, float | None]]:

@@ -19,7 +19,7 @@ import pytest
 
 from pipeline.joint.estimator import JointSlam
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
-from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, simulate_bearings
+from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, scatter_landmarks, simulate_bearings
 
 EPS = math.radians(3.0)
 ROUNDS = 5
@@ -29,11 +29,8 @@ def _run(n_landmarks: int, seed: int) -> SimulatedRun:
     if n_landmarks == 4:
         return simulate_bearings(10, np.random.default_rng(seed), eps_rad=EPS)
     rng = np.random.default_rng(seed)
-    pts: dict[str, tuple[float, float]] = {"L1": (1.2, 1.7), "L2": (1.8, 1.7)}
-    while len(pts) < n_landmarks:
-        p = rng.uniform([0.05, 0.05], [2.95, 1.95])
-        if all(math.dist(p, q) > 0.12 for q in pts.values()):
-            pts[f"L{len(pts) + 1}"] = (float(p[0]), float(p[1]))
+    ref = {"L1": (1.2, 1.7), "L2": (1.8, 1.7)}
+    pts = scatter_landmarks(rng, ref, n_landmarks, (0.05, 0.05), (2.95, 1.95), 0.12)
     return simulate_bearings(
         10,
         rng,

@@ -16,7 +16,13 @@ from pipeline.joint.estimator import JointSlam
 from pipeline.joint.geometry import Sightings, intersect_rays, resect
 from pipeline.joint.noise import estimate_noise
 from pipeline.slam import MovementObservation
-from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, random_arena, simulate_bearings
+from pipeline.synthetic import (
+    PAPER_REFERENCE,
+    SimulatedRun,
+    random_arena,
+    scatter_landmarks,
+    simulate_bearings,
+)
 
 EPS = math.radians(3.0)
 
@@ -173,6 +179,71 @@ def test_divergence_falls_back_to_the_particles() -> None:
         # the same optimum as the incremental map, within a tenth of its std
         std = math.sqrt(float(np.linalg.eigvalsh(est.cov_fl)[-1]))
         assert np.hypot(*(est.mean_fl - reference.estimates[name].mean_fl)) < 0.1 * std
+
+
+def test_a_map_that_stays_diverged_is_not_reported() -> None:
+    # 10 landmarks in 3 x 2 m; at the first two movements five of them are wrong detections at O1
+    # (random bearings): the bootstrap fits its median but not the rest, re-initialization from
+    # the particles cannot fix wrong bearings, so the movement is refused and nothing is output
+    rng = np.random.default_rng(5)
+    lms = {f"L{i + 1}": tuple(rng.uniform([0.1, 0.1], [2.9, 1.9])) for i in range(10)}
+    lms["L1"], lms["L2"] = (1.3, 1.0), (1.7, 1.0)
+    run = simulate_bearings(
+        6, rng, eps_rad=EPS, landmarks_world=lms, arena_m=(3.0, 2.0), move_m=(0.2, 0.5)
+    )
+    obs = list(run.observations)
+    for k in (0, 1):
+        wrong = {n: float(rng.uniform(-math.pi, math.pi)) for n in list(lms)[2:7]}
+        obs[k] = replace(obs[k], bearings_o1_rad={**obs[k].bearings_o1_rad, **wrong})
+    slam = _slam(run, PAPER_REFERENCE, 0)
+    results = []
+    for o in obs:
+        results.append(slam.process_movement(o))
+        if results[-1].status == "ok":  # whatever is reported fits its bearings
+            assert slam._misfit(EPS) == ""
+    refused = [r for r in results if r.divergence]
+    assert refused
+    for r in refused:
+        assert r.status.startswith("skipped: the map diverged with it")
+        assert "re-initialization from the particles did not fit" in r.status
+        assert r.placement == "" and r.estimates == {} and r.o1_fl.size == 0
+    assert slam.reinitializations == len(refused)
+    assert results[-1].status == "ok" and results[-1].estimates
+
+
+def _crowded_run(seed: int) -> SimulatedRun:
+    """A hard arena: 20 landmarks in 3 x 2 m, the reference pair 46 cm apart in the middle (the
+    far landmarks are 4 FL away), bearing noise eps/3, 15% of the O2 detections missed."""
+    rng = np.random.default_rng(seed)
+    lo, hi = (0.1, 0.1), (2.9, 1.9)
+    lms = scatter_landmarks(rng, {"L1": (1.2, 1.0), "L2": (1.66, 1.0)}, 20, lo, hi, 0.15)
+    arena = {"landmarks_world": lms, "arena_m": (3.0, 2.0), "move_m": (0.3, 0.5)}
+    run = simulate_bearings(10, rng, eps_rad=EPS, sigma_frac=1 / 3, **arena)  # type: ignore[arg-type]
+    for k, o in enumerate(run.observations):
+        seen = rng.random(len(lms)) >= 0.15
+        o2 = {n: b for (n, b), keep in zip(o.bearings_o2_rad.items(), seen, strict=True) if keep}
+        run.observations[k] = replace(o, bearings_o2_rad=o2)
+    return run
+
+
+@pytest.mark.parametrize("seed", [8, 11])
+def test_a_landmark_with_a_wrong_first_estimate_is_put_where_its_rays_meet(seed: int) -> None:
+    # one landmark enters the map from a poor first estimate (2.9 m and 41 cm off before the
+    # fix), and its later bearings, which all disagree with it, were rejected as wrong detections
+    run = _crowded_run(seed)
+    slam = _joint(run, PAPER_REFERENCE, 0)
+    truth = run.truth_fl()
+    unit_m = math.dist(run.landmarks_world["L1"], run.landmarks_world["L2"])
+    err_cm = {
+        n: 100 * unit_m * float(np.hypot(*(e.mean_fl - truth[n])))
+        for n, e in slam.estimates.items()
+    }
+    assert len(err_cm) == 18
+    assert max(err_cm.values()) < 25.0  # the far landmarks are 4 FL (1.9 m) from L1
+    assert np.mean(list(err_cm.values())) < 10.0
+    for name in err_cm:  # no landmark keeps most of its bearings out of the map
+        own = [b for b in slam._bearings() if b.landmark == name]
+        assert sum(b in slam._rejected for b in own) <= len(own) / 2
 
 
 def test_landmark_jump_is_detected() -> None:
