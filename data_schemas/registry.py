@@ -14,7 +14,7 @@ import json
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
-from typing import Any
+from typing import Any, Literal
 
 from data_schemas.errors import UnknownSchemaError
 
@@ -79,8 +79,19 @@ _TOPIC_LIST = [
 #: Topic name -> :class:`Topic`.
 TOPICS: dict[str, Topic] = {t.name: t for t in _TOPIC_LIST}
 
+#: How a frame's pixels are stored on ``/camera/panorama`` (both lossless).
+ImageEncoding = Literal["png", "bgr8"]
+
+#: Schema of ``/camera/panorama`` for each encoding: PNG in ``foxglove.CompressedImage``
+#: (``format``), BGR pixels in ``foxglove.RawImage`` (``encoding``, ``width``, ``height``,
+#: ``step``).
+IMAGE_SCHEMA: dict[ImageEncoding, str] = {
+    "png": "foxglove.CompressedImage",
+    "bgr8": "foxglove.RawImage",
+}
+
 #: Image schemas accepted on ``/camera/panorama``.
-IMAGE_SCHEMAS = ("foxglove.CompressedImage", "foxglove.RawImage")
+IMAGE_SCHEMAS = tuple(IMAGE_SCHEMA.values())
 
 
 def _schema_file(name: str) -> str:

@@ -1,7 +1,7 @@
 """Simulated bearings from known geometry (no images): for tests, benchmarks and examples.
 
-The default geometry is the paper's arena (issue 2's scenario): 1.05 x 0.68 m, landmarks
-L1 (0.375, 0.55), L2 (0.675, 0.55), L3 (0.20, 0.20), L4 (0.85, 0.18), reference pair (L1, L2).
+The default geometry is the paper's arena (:mod:`data_schemas.paper_arena`): 1.05 x 0.68 m, four
+landmarks, reference pair (L1, L2).
 The robot drives a polygonal path of straight movements in random directions, 0.10-0.25 m
 long, staying inside the arena and away from the landmarks. Bearing noise: Gaussian of std
 ``sigma_frac * eps`` truncated to ``[-eps, eps]`` (the bound the method assumes).
@@ -18,18 +18,10 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import EstimationError
+from data_schemas.paper_arena import PAPER_ARENA_M, PAPER_LANDMARKS_M, PAPER_REFERENCE
 from pipeline.frame_change import to_fl
 from pipeline.priors import ImpartialPrior
 from pipeline.slam import MovementObservation
-
-ARENA_M = (1.05, 0.68)
-PAPER_LANDMARKS_M: dict[str, tuple[float, float]] = {
-    "L1": (0.375, 0.55),
-    "L2": (0.675, 0.55),
-    "L3": (0.20, 0.20),
-    "L4": (0.85, 0.18),
-}
-PAPER_REFERENCE = ("L1", "L2")
 
 
 @dataclass(frozen=True)
@@ -73,7 +65,7 @@ def simulate_bearings(
     eps_rad: float = math.radians(3.0),
     sigma_frac: float = 0.5,
     landmarks_world: Mapping[str, tuple[float, float]] = PAPER_LANDMARKS_M,
-    arena_m: tuple[float, float] = ARENA_M,
+    arena_m: tuple[float, float] = PAPER_ARENA_M,
     move_m: tuple[float, float] = (0.10, 0.25),
     clearance_m: float = 0.06,
 ) -> SimulatedRun:
@@ -181,7 +173,7 @@ def random_arena(
         if all(math.dist(p, q) > spacing_m for q in pts.values()):
             pts[f"L{len(pts) + 1}"] = (float(p[0]), float(p[1]))
     a, b = (int(i) for i in rng.choice(n, 2, replace=False))
-    scale = max(w, h) / ARENA_M[0]
+    scale = max(w, h) / PAPER_ARENA_M[0]
     return Arena(
         (w, h),
         pts,

@@ -15,22 +15,20 @@ Both are lossless and both are displayed by Foxglove's Image panel.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.registry import ImageEncoding
 from data_schemas.stamps import stamp_from_ns
 from recorder.png import check_bgr, encode_png
 
-Encoding = Literal["png", "bgr8"]
 FRAME_ID = "panorama"
-#: Schema of ``/camera/panorama`` for each encoding.
-IMAGE_SCHEMA: dict[str, str] = {"png": "foxglove.CompressedImage", "bgr8": "foxglove.RawImage"}
 
 
 def frame_message(
-    image_bgr: NDArray[np.uint8], t_ns: int, *, encoding: Encoding, png_level: int = 1
+    image_bgr: NDArray[np.uint8], t_ns: int, *, encoding: ImageEncoding, png_level: int = 1
 ) -> dict[str, Any]:
     """The ``/camera/panorama`` message of one frame taken at ``t_ns``, for ``LogWriter``.
 

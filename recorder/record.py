@@ -33,10 +33,11 @@ from typing import Any
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import BslamError, LogError
 from data_schemas.mcap.writer import LogWriter
+from data_schemas.registry import IMAGE_SCHEMA, ImageEncoding
 from data_schemas.stamps import stamp_from_ns
 from recorder.camera import Camera
 from recorder.clock import Clock
-from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message
+from recorder.frames import frame_message
 from recorder.moves import Move
 from recorder.png import check_level
 from recorder.robot import Robot, drive, turn
@@ -68,7 +69,7 @@ class RecordSettings:
     """
 
     frame_rate_hz: float = 5.0
-    encoding: Encoding = "png"
+    encoding: ImageEncoding = "png"
     png_level: int = 1
     poll_s: float = 0.05
     chunk_compression: str = ""

@@ -9,12 +9,13 @@ import os
 import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 from data_schemas.calibration import Calibration, calibration_from_dict
 from data_schemas.codec import validate
 from data_schemas.errors import BslamError, CalibrationError, SchemaError
 from data_schemas.mcap.writer import software_version
+from data_schemas.registry import ImageEncoding
 from data_schemas.session import (
     SCHEMA_VERSION,
     LandmarkSpec,
@@ -42,7 +43,7 @@ def build_session_doc(
     camera_source: str,
     calibration: Calibration,
     frame_rate_hz: float,
-    encoding: Literal["png", "bgr8"],
+    encoding: ImageEncoding,
     landmarks: Sequence[LandmarkSpec],
     reference: tuple[str, str],
     vision_error_rad: float,

@@ -13,6 +13,9 @@ from pipeline.bearings.blobs import Blob
 class Detection:
     """One landmark in one frame.
 
+    A derived log carries the fields the ``bslam.Detection`` schema declares (None ones left
+    out); ``second_bearing_rad``, ``blobs`` and ``ambiguous`` stay in memory.
+
     Attributes
     ----------
     name : str

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 
+from data_schemas.registry import IMAGE_SCHEMA
 from replay.cli.options import FiniteFloat
 
 if TYPE_CHECKING:
@@ -40,7 +41,7 @@ def frame_options(func: F) -> F:
             ),
             click.option(
                 "--encoding",
-                type=click.Choice(["png", "bgr8"]),
+                type=click.Choice(list(IMAGE_SCHEMA)),
                 default="png",
                 show_default=True,
                 help="Frame storage (both lossless).",

@@ -11,13 +11,17 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from dataclasses import fields
+from functools import cache
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.mcap.writer import LogWriter
+from data_schemas.registry import schema_dict
 from data_schemas.stamps import stamp_from_ns
+from pipeline.bearings.detection import Detection
 from replay.records import FrameRecord, MovementRecord, RunInfo
 
 
@@ -50,6 +54,27 @@ def point_set(name: str, points: NDArray[np.floating]) -> dict[str, Any]:
 
 def _point_sets(sets: Mapping[str, NDArray[np.float64]]) -> list[dict[str, Any]]:
     return [point_set(name, p) for name, p in sets.items()]
+
+
+@cache
+def logged_detection_fields() -> tuple[str, ...]:
+    """The :class:`~pipeline.bearings.detection.Detection` fields a ``bslam.Detection`` carries.
+
+    The schema chooses: every dataclass field it declares, in the dataclass's order (the
+    extractor's working fields, e.g. ``blobs``, stay out of the log).
+    """
+    declared = schema_dict("bslam.Detection")["properties"]
+    return tuple(f.name for f in fields(Detection) if f.name in declared)
+
+
+def detection_message(detection: Detection) -> dict[str, Any]:
+    """A ``bslam.Detection`` from a :class:`~pipeline.bearings.detection.Detection`.
+
+    Fields that are None (no bearing) are left out rather than null (Foxglove's schema parser
+    has no nulls).
+    """
+    values = ((name, getattr(detection, name)) for name in logged_detection_fields())
+    return {name: value for name, value in values if value is not None}
 
 
 def _joint_fields(record: MovementRecord) -> dict[str, Any]:
@@ -103,22 +128,7 @@ class DerivedLogSink:
         self._writer.write(topic, msg)
 
     def frame(self, frame: FrameRecord) -> None:
-        # optional fields are left out rather than null (Foxglove's schema parser has no nulls)
-        detections = []
-        for d in frame.detections.values():
-            detection: dict[str, Any] = {
-                "name": d.name,
-                "visible": d.visible,
-                "width_rad": d.width_rad,
-                "confidence": d.confidence,
-                "n_pixels": d.n_pixels,
-                "n_blobs": d.n_blobs,
-            }
-            if d.bearing_rad is not None:
-                detection["bearing_rad"] = d.bearing_rad
-            if d.reason is not None:
-                detection["reason"] = d.reason
-            detections.append(detection)
+        detections = [detection_message(d) for d in frame.detections.values()]
         msg: dict[str, Any] = {
             "timestamp": stamp_from_ns(frame.timestamp_ns),
             "detections": detections,

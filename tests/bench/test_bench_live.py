@@ -32,8 +32,9 @@ import pytest
 from test_bench_writer import _doc, _panorama
 
 from data_schemas.mcap.writer import LogWriter
+from data_schemas.registry import IMAGE_SCHEMA
 from recorder.clock import SystemClock
-from recorder.frames import IMAGE_SCHEMA, frame_message
+from recorder.frames import frame_message
 from recorder.timebase import EpochClock
 
 BSLAM = [sys.executable, "-m", "replay.cli"]

@@ -39,10 +39,10 @@ from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.recover import recover_log
 from data_schemas.mcap.writer import LogWriter
-from data_schemas.registry import MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json
+from data_schemas.registry import IMAGE_SCHEMA, MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json
 from data_schemas.session import LandmarkSpec
 from recorder.clock import VirtualClock
-from recorder.frames import IMAGE_SCHEMA, frame_message
+from recorder.frames import frame_message
 from recorder.session import build_session_doc
 from recorder.timebase import EpochClock
 

@@ -32,9 +32,10 @@ import pytest
 
 from data_schemas.calibration import UnwrappedCalibration
 from data_schemas.mcap.writer import LogWriter
+from data_schemas.registry import IMAGE_SCHEMA, ImageEncoding
 from data_schemas.session import LandmarkSpec
 from recorder.clock import SystemClock
-from recorder.frames import IMAGE_SCHEMA, Encoding, frame_message
+from recorder.frames import frame_message
 from recorder.png import encode_png
 from recorder.session import build_session_doc
 from recorder.timebase import EpochClock
@@ -61,7 +62,7 @@ def _panorama(height: int, width: int) -> np.ndarray:
     return np.clip(image.astype(np.int16) + noise, 0, 255).astype(np.uint8)
 
 
-def _doc(height: int, width: int, encoding: Encoding) -> dict[str, object]:
+def _doc(height: int, width: int, encoding: ImageEncoding) -> dict[str, object]:
     return build_session_doc(
         created_unix_ns=time.time_ns(),
         robot={"model": "bench", "port": "-", "baudrate": 1, "mm_per_pulse": 1, "wheel_base_m": 1},

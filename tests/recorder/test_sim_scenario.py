@@ -15,6 +15,7 @@ import pytest
 from data_schemas.calibration import OmniCalibration, UnwrappedCalibration
 from data_schemas.codec import validate
 from data_schemas.errors import ScenarioError
+from data_schemas.paper_arena import PAPER_ARENA_M, PAPER_LANDMARKS_M, PAPER_REFERENCE
 from recorder.sim.scenario import (
     BUILTIN_SCENARIOS,
     builtin_scenario,
@@ -49,6 +50,15 @@ def test_paper_scenario_matches_the_paper() -> None:
     cal = s.calibration()
     assert isinstance(cal, UnwrappedCalibration)
     assert (cal.width, cal.height) == (255, 176)
+
+
+@pytest.mark.parametrize("name", ["paper", "paper_omni"])
+def test_paper_scenarios_place_the_paper_arena(name: str) -> None:
+    # data_schemas.paper_arena is the paper's geometry; the built-in files must agree with it
+    s = builtin_scenario(name)
+    assert (s.arena.width_m, s.arena.height_m) == PAPER_ARENA_M
+    assert {lm.name: (lm.x, lm.y) for lm in s.landmarks} == PAPER_LANDMARKS_M
+    assert s.reference == PAPER_REFERENCE
 
 
 def test_omni_scenario_has_an_omni_calibration() -> None:

@@ -19,28 +19,26 @@ import numpy as np
 from data_schemas.calibration import UnwrappedCalibration
 from data_schemas.colors import NOMINAL_BGR
 from data_schemas.mcap.writer import LogWriter
+from data_schemas.paper_arena import PAPER_ARENA_M, PAPER_LANDMARKS_M, PAPER_REFERENCE
 from data_schemas.session import LandmarkSpec
 from data_schemas.stamps import stamp_from_ns
 from recorder.clock import VirtualClock
 from recorder.session import build_session_doc
 from recorder.timebase import EpochClock
 
-LANDMARKS = {
-    "L1": (0.375, 0.55, "red"),
-    "L2": (0.675, 0.55, "green"),
-    "L3": (0.20, 0.20, "blue"),
-    "L4": (0.85, 0.18, "yellow"),
-}
+COLORS = {"L1": "red", "L2": "green", "L3": "blue", "L4": "yellow"}
+#: The paper's landmarks: name -> (x, y, colour), m, world frame.
+LANDMARKS = {n: (*PAPER_LANDMARKS_M[n], c) for n, c in COLORS.items()}
 WIDTH, HEIGHT = 360, 40
 
 
 def scenario() -> dict[str, Any]:
     return {
-        "arena": {"width": 1.05, "height": 0.68},
+        "arena": {"width": PAPER_ARENA_M[0], "height": PAPER_ARENA_M[1]},
         "landmarks": [
             {"name": n, "x": x, "y": y, "color": c} for n, (x, y, c) in LANDMARKS.items()
         ],
-        "reference": ["L1", "L2"],
+        "reference": list(PAPER_REFERENCE),
         "camera": {"model": "unwrapped", "width": WIDTH, "height": HEIGHT},
         "vision_error_deg": 3.0,
         "trajectory": {"start": [0.52, 0.34], "moves": 3},
