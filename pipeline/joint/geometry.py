@@ -298,8 +298,8 @@ def _ray_errors(
     directions_rad: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """Angle (k,) between each ray and the direction to the point (pi: behind)."""
-    d = point_fl - origins_fl
-    return np.abs(wrap_rad(np.arctan2(d[:, 1], d[:, 0]) - directions_rad))
+    points = np.broadcast_to(point_fl, origins_fl.shape)
+    return np.abs(predicted_bearings(origins_fl, directions_rad, points))
 
 
 def intersect_rays(
