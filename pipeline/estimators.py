@@ -35,6 +35,11 @@ class Estimator(Protocol):
         """The current map: non-reference landmarks, FL."""
 
 
+#: Default relative std of the joint estimator's prior on each movement's length from its driven
+#: distance (docs/method.md, the joint estimator: measured on the paper protocol).
+DEFAULT_DISTANCE_PRIOR_REL = 0.05
+
+
 def make_estimator(
     name: str,
     landmarks: Sequence[str],
@@ -46,12 +51,13 @@ def make_estimator(
     n_r: int = 50,
     n_l: int = 300,
     turn_prior_sigma_rad: float | None = None,
+    distance_prior_rel: float | None = None,
 ) -> Estimator:
     """The estimator called ``name`` (``"joint"`` or ``"paper"``), set up for one run.
 
     ``paper`` is :class:`~pipeline.slam.BearingSlam` exactly as the paper's method;
     ``joint`` is :class:`~pipeline.joint.JointSlam`, initialized by the same filter.
-    ``turn_prior_sigma_rad`` only concerns the joint estimator.
+    ``turn_prior_sigma_rad`` and ``distance_prior_rel`` only concern the joint estimator.
     """
     common = {"vision_error_rad": vision_error_rad, "prior": prior, "n_r": n_r, "n_l": n_l}
     if name == "paper":
@@ -64,6 +70,7 @@ def make_estimator(
             reference,
             rng=rng,
             turn_prior_sigma_rad=turn_prior_sigma_rad,
+            distance_prior_rel=distance_prior_rel,
             **common,  # type: ignore[arg-type]
         )
     raise EstimationError(f"unknown estimator {name!r}; use one of {', '.join(ESTIMATORS)}")

@@ -52,14 +52,16 @@ class MovementObservation:
     """Bearings of one straight movement (robot frame, rad, CCW, 0 = forward).
 
     A landmark missing from either mapping is not used for this movement. ``turn_rad`` is the
-    commanded turn in place before the movement (CCW, ``/robot/movement``), if known; the paper's
-    filter does not use it.
+    commanded turn in place before the movement (CCW, ``/robot/movement``) and ``distance_m`` the
+    straight distance driven (metres: the wheel odometry of ``/robot/odometry`` when logged, else
+    the commanded distance), if known; the paper's filter uses neither.
     """
 
     index: int
     bearings_o1_rad: Mapping[str, float]
     bearings_o2_rad: Mapping[str, float]
     turn_rad: float | None = None
+    distance_m: float | None = None
 
 
 def _empty() -> NDArray[np.float64]:

@@ -31,6 +31,7 @@ def estimator_for(
         n_l=method.n_l,
         rng=np.random.default_rng(method.seed),
         turn_prior_sigma_rad=turn,
+        distance_prior_rel=method.distance_prior,
     )
 
 

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from data_schemas.errors import EstimationError
 from data_schemas.session import Session
 from pipeline.bearings import Detection
-from pipeline.estimators import DEFAULT_ESTIMATOR, ESTIMATORS
+from pipeline.estimators import DEFAULT_DISTANCE_PRIOR_REL, DEFAULT_ESTIMATOR, ESTIMATORS
 from pipeline.priors import PriorName
 from replay.truth import Truth
 
@@ -43,6 +43,10 @@ class MethodConfig:
     turn_prior_deg : float or None
         Joint estimator: std of a prior on each turn in place from the commanded turn
         (``/robot/movement``); None leaves the turns free.
+    distance_prior : float or None
+        Joint estimator: relative std of a prior on each movement's length from its driven
+        distance (odometry, else the commanded distance); None leaves the lengths free.
+        An expected summary without it was made with the lengths free (``replay.regress``).
     """
 
     prior: str = "impartial"
@@ -51,6 +55,7 @@ class MethodConfig:
     seed: int = 0
     estimator: str = DEFAULT_ESTIMATOR
     turn_prior_deg: float | None = None
+    distance_prior: float | None = DEFAULT_DISTANCE_PRIOR_REL
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:
@@ -61,6 +66,8 @@ class MethodConfig:
             )
         if self.turn_prior_deg is not None and not self.turn_prior_deg > 0.0:
             raise EstimationError(f"turn prior std must be > 0 deg, got {self.turn_prior_deg}")
+        if self.distance_prior is not None and not self.distance_prior > 0.0:
+            raise EstimationError(f"distance prior std must be > 0, got {self.distance_prior}")
 
     @property
     def prior_name(self) -> PriorName:
@@ -79,6 +86,8 @@ class MethodConfig:
         }
         if self.estimator == "joint" and self.turn_prior_deg is not None:
             out["turn_prior_deg"] = self.turn_prior_deg
+        if self.estimator == "joint" and self.distance_prior is not None:
+            out["distance_prior"] = self.distance_prior
         return out
 
 

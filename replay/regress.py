@@ -109,6 +109,7 @@ def method_of(expected: Mapping[str, Any]) -> MethodConfig:
         seed=m["seed"],
         estimator=m.get("estimator", "paper"),
         turn_prior_deg=m.get("turn_prior_deg"),
+        distance_prior=m.get("distance_prior"),
     )
 
 

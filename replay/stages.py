@@ -288,12 +288,14 @@ class Runner:
                 {n: b for n, (b, _) in bearings.items() if b is not None},
                 {n: b for n, (_, b) in bearings.items() if b is not None},
                 self.plan.turns_rad.get(index),
+                self.plan.distances_m.get(index),
             )
             assoc = None
             if self.alike is not None:
-                obs, assoc = self.alike.observe(
+                named, assoc = self.alike.observe(
                     index, (start.detections, end.detections), obs.turn_rad, self.slam
                 )
+                obs = replace(named, distance_m=obs.distance_m)
             result = self.slam.process_movement(obs)
             if self.alike is not None and assoc is not None:
                 self.alike.after(assoc, result, self.slam)

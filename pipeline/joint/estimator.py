@@ -79,18 +79,19 @@ RESEAT_MIN_REJECTED = 3
 
 @dataclass
 class _Movement:
-    """A movement's bearings (catalog landmarks, finite) and its commanded turn."""
+    """A movement's bearings (catalog landmarks, finite), commanded turn and driven distance."""
 
     index: int
     turn_rad: float | None
     bearings: list[g.Bearing]
+    distance_m: float | None = None
 
     def observation(self) -> MovementObservation:
         """The bearings back as a :class:`MovementObservation`."""
         ends: tuple[dict[str, float], dict[str, float]] = ({}, {})
         for b in self.bearings:
             ends[b.end][b.landmark] = b.bearing_rad
-        return MovementObservation(self.index, ends[0], ends[1], self.turn_rad)
+        return MovementObservation(self.index, ends[0], ends[1], self.turn_rad, self.distance_m)
 
 
 @dataclass(frozen=True)
@@ -121,6 +122,10 @@ class JointSlam:
     turn_prior_sigma_rad : float or None
         Std of a prior on each turn in place from the commanded turn
         (``MovementObservation.turn_rad``); None (default) leaves the turn free.
+    distance_prior_rel : float or None
+        Relative std of a prior on each movement's length from its driven distance
+        (``MovementObservation.distance_m``), through one scale variable (the map's FL units per
+        metre, unknown); None leaves the lengths free.
     divergence_rms_rad : float or None
         The map counts as diverged when the robust RMS of its residuals exceeds this (default
         eps), or when a landmark jumps (:data:`JUMP_FL` and :data:`JUMP_SIGMAS`).
@@ -138,6 +143,7 @@ class JointSlam:
         n_l: int = 300,
         robust: bool = True,
         turn_prior_sigma_rad: float | None = None,
+        distance_prior_rel: float | None = None,
         divergence_rms_rad: float | None = None,
     ) -> None:
         self.paper = BearingSlam(
@@ -151,11 +157,14 @@ class JointSlam:
         )
         if turn_prior_sigma_rad is not None and not turn_prior_sigma_rad > 0.0:
             raise EstimationError(f"turn prior std must be > 0, got {turn_prior_sigma_rad}")
+        if distance_prior_rel is not None and not distance_prior_rel > 0.0:
+            raise EstimationError(f"distance prior std must be > 0, got {distance_prior_rel}")
         self.landmarks = list(self.paper.landmarks)
         self.reference = reference
         self.eps_rad = float(vision_error_rad)
         self.robust = robust
         self.turn_prior_sigma_rad = turn_prior_sigma_rad
+        self.distance_prior_rel = distance_prior_rel
         self.divergence_rms_rad = self.eps_rad if divergence_rms_rad is None else divergence_rms_rad
         self.sigma0_rad = truncated_gaussian_std(self.eps_rad)
         self.sigma_model_rad = self.sigma0_rad
@@ -202,6 +211,14 @@ class JointSlam:
     def estimates(self) -> dict[str, LandmarkEstimate]:
         """Current estimate per non-reference landmark in the graph (FL)."""
         return dict(self._estimates)
+
+    @property
+    def unit_m(self) -> float | None:
+        """The map's unit |L1 L2| in metres, estimated through the distance prior (None without
+        it, or before a movement with a distance is in the map)."""
+        if not self._values.exists(g.SCALE_KEY):
+            return None
+        return math.exp(-float(self._values.atVector(g.SCALE_KEY)[0]))
 
     @property
     def used_movements(self) -> list[int]:
@@ -298,6 +315,22 @@ class JointSlam:
         """In-place links of movement ``k`` to its placed neighbours."""
         return [(a, b) for a, b in ((k - 1, k), (k, k + 1)) if {a, b} - {k} <= set(self._placed)]
 
+    def _distance_m(self, m: _Movement) -> float | None:
+        """The distance the prior uses for ``m`` (None: no prior, or no usable distance)."""
+        d = m.distance_m
+        if self.distance_prior_rel is None or d is None or not (math.isfinite(d) and d > 0.0):
+            return None
+        return d
+
+    def _distance_factor(self, movement: int, distance_m: float) -> gtsam.NonlinearFactor:
+        return g.distance_factor(
+            g.pose_key(movement, 0),
+            g.pose_key(movement, 1),
+            distance_m,
+            self.distance_prior_rel or 0.0,
+            self.robust,
+        )
+
     def _link_factor(self, link: tuple[int, int]) -> gtsam.NonlinearFactor:
         a, b = link
         turn = self._placed[b].turn_rad if self.turn_prior_sigma_rad is not None else None
@@ -323,6 +356,13 @@ class JointSlam:
             key = g.pose_key(m.index, end)
             values.insert(key, p2)
             graph.add(g.weak_pose_prior(key, p2))
+        distance = self._distance_m(m)
+        if distance is not None:
+            if not values.exists(g.SCALE_KEY) and not self._values.exists(g.SCALE_KEY):
+                log_scale = math.log(pose.length_fl / distance)
+                values.insert(g.SCALE_KEY, np.array([log_scale]))
+                graph.add(g.weak_scale_prior(log_scale))
+            graph.add(self._distance_factor(m.index, distance))
         for link in links:
             self._links.add(link)
             graph.add(self._link_factor(link))
@@ -587,11 +627,16 @@ class JointSlam:
         for name in self._in_graph - set(self.reference):
             key = self._key(name)
             graph.add(g.weak_point_prior(key, np.asarray(values.atPoint2(key), np.float64)))
+        if values.exists(g.SCALE_KEY):
+            graph.add(g.weak_scale_prior(float(values.atVector(g.SCALE_KEY)[0])))
         for k in sorted(self._placed):
             graph.add(g.straight_factor(g.pose_key(k, 0), g.pose_key(k, 1)))
             for end in (0, 1):
                 key = g.pose_key(k, end)
                 graph.add(g.weak_pose_prior(key, values.atPose2(key)))
+            distance = self._distance_m(self._placed[k])
+            if distance is not None and values.exists(g.SCALE_KEY):
+                graph.add(self._distance_factor(k, distance))
         for link in sorted(self._links):
             graph.add(self._link_factor(link))
         noise = self._bearing_noise()
@@ -636,6 +681,8 @@ class JointSlam:
             pose = found.pose if found is not None else self._movement_pose(k, old)
             for end, p in enumerate(_pose2s(pose)):
                 values.insert(g.pose_key(k, end), p)
+        if old.exists(g.SCALE_KEY):
+            values.insert(g.SCALE_KEY, old.atVector(g.SCALE_KEY))
         return values
 
     # ------------------------------------------------------------------ checks
@@ -657,7 +704,11 @@ class JointSlam:
         return used, r
 
     def _n_params(self) -> int:
-        return 2 * (len(self._in_graph) - 2) + 4 * len(self._placed) - 2 * len(self._links)
+        """Free parameters the bearings determine (each distance prior fixes one, the scale
+        adds one)."""
+        n = 2 * (len(self._in_graph) - 2) + 4 * len(self._placed) - 2 * len(self._links)
+        n_distance = sum(1 for m in self._placed.values() if self._distance_m(m) is not None)
+        return n - n_distance + 1 if n_distance else n
 
     def _jumped(self, before: dict[str, LandmarkEstimate]) -> str:
         for name, prev in before.items():
@@ -752,7 +803,7 @@ class JointSlam:
         ]
         if obs.index in self._placed or obs.index in self._waiting:
             raise EstimationError(f"movement {obs.index} was already processed")
-        m = _Movement(obs.index, obs.turn_rad, bearings)
+        m = _Movement(obs.index, obs.turn_rad, bearings, obs.distance_m)
         snapshot = self._snapshot()
         self._waiting[obs.index] = m
         before = self.estimates

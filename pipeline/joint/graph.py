@@ -2,10 +2,13 @@
 
 One ``Pose2`` per keyframe (key ``x(2 k + end)``, ``end`` 0 at O1 and 1 at O2 of movement k),
 one ``Point2`` per landmark (key ``l(j)``, ``j`` its catalog index). FL units (|L1 L2| = 1).
+With a distance prior, one more variable: the map's scale, ``log`` of FL units per metre (key
+:data:`SCALE_KEY`, a 1-vector), which ties every movement's length in FL to its distance in metres.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import gtsam
@@ -24,6 +27,10 @@ WEAK_SIGMA = 100.0
 HUBER_K = 1.345
 #: Loose std (FL) for the length of a movement: a free variable in practice.
 FREE_LENGTH_SIGMA_FL = 100.0
+
+
+#: Key of the map's scale (log of FL units per metre), present only with a distance prior.
+SCALE_KEY = int(gtsam.symbol("s", 0))
 
 
 def pose_key(movement: int, end: int) -> int:
@@ -111,3 +118,43 @@ def weak_point_prior(key: int, point_fl: NDArray[np.float64]) -> gtsam.Nonlinear
 def weak_pose_prior(key: int, pose: gtsam.Pose2) -> gtsam.NonlinearFactor:
     """A very wide prior at a keyframe's initial value (keeps the system determined)."""
     return gtsam.PriorFactorPose2(key, pose, gtsam.noiseModel.Isotropic.Sigma(3, WEAK_SIGMA))
+
+
+def distance_factor(
+    o1: int, o2: int, distance_m: float, rel_sigma: float, robust: bool = True
+) -> gtsam.NonlinearFactor:
+    """Movement length |O2 - O1| (FL) = scale (FL per metre) x ``distance_m``, relative std
+    ``rel_sigma``: error ``log |O2 - O1| - log_scale - log distance_m`` (Huber unless not
+    ``robust``; a wheel that slipped a lot must not drag the map's scale)."""
+    log_d = math.log(distance_m)
+
+    def error(
+        this: gtsam.CustomFactor, values: gtsam.Values, jac: list[NDArray[np.float64]] | None
+    ) -> NDArray[np.float64]:
+        p1, p2 = values.atPose2(this.keys()[0]), values.atPose2(this.keys()[1])
+        log_scale = float(values.atVector(this.keys()[2])[0])
+        dx, dy = p2.x() - p1.x(), p2.y() - p1.y()
+        length2 = max(dx * dx + dy * dy, 1e-18)
+        if jac is not None:
+            # d log|d| / d (world position) = d^T / |d|^2; Pose2 moves in its body frame
+            for i, (pose, sign) in enumerate(((p1, -1.0), (p2, 1.0))):
+                c, s = math.cos(pose.theta()), math.sin(pose.theta())
+                gx, gy = sign * dx / length2, sign * dy / length2
+                jac[i] = np.array([[gx * c + gy * s, -gx * s + gy * c, 0.0]])
+            jac[2] = np.array([[-1.0]])
+        return np.array([0.5 * math.log(length2) - log_scale - log_d])
+
+    base = gtsam.noiseModel.Isotropic.Sigma(1, rel_sigma)
+    noise = (
+        gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(HUBER_K), base)
+        if robust
+        else base
+    )
+    return gtsam.CustomFactor(noise, [o1, o2, SCALE_KEY], error)
+
+
+def weak_scale_prior(log_scale: float) -> gtsam.NonlinearFactor:
+    """A very wide prior at the scale's initial value (keeps the system determined)."""
+    return gtsam.PriorFactorVector(
+        SCALE_KEY, np.array([log_scale]), gtsam.noiseModel.Isotropic.Sigma(1, WEAK_SIGMA)
+    )

@@ -13,7 +13,7 @@ import click
 
 from replay.cli.follow import end_of_follow, follow_options
 from replay.cli.options import SEED
-from replay.experiments.protocol import PRIORS
+from replay.experiments.protocol import DEFAULT_DISTANCE_PRIOR, PRIORS
 
 if TYPE_CHECKING:
     from replay.batch import LogJob
@@ -51,6 +51,16 @@ def method_options(fn: click.decorators.FC) -> click.decorators.FC:
                 metavar="DEG",
                 help="Joint estimator: trust each commanded turn in place to this std "
                 "(degrees) [default: turns free].",
+            ),
+            click.option(
+                "--distance-prior",
+                "distance_prior",
+                type=click.FloatRange(0.0),
+                default=DEFAULT_DISTANCE_PRIOR,
+                show_default=True,
+                metavar="FRACTION",
+                help="Joint estimator: trust each movement's driven distance (odometry, else the "
+                "commanded distance) to this relative std; 0 leaves the lengths free.",
             ),
             click.option(
                 "--prior",
@@ -152,6 +162,7 @@ def process(
     summary: Path | None,
     estimator: str,
     turn_prior_deg: float | None,
+    distance_prior: float,
     prior: str,
     n_r: int,
     n_l: int,
@@ -187,6 +198,7 @@ def process(
         seed=seed,
         estimator=estimator,
         turn_prior_deg=turn_prior_deg,
+        distance_prior=distance_prior or None,
     )
     if follow:
         _process_followed(logs, out, summary, method, idle_timeout, scheduler, force)

@@ -42,6 +42,7 @@ def replay(
     skip_corrupt: bool,
     estimator: str,
     turn_prior_deg: float | None,
+    distance_prior: float,
     prior: str,
     n_r: int,
     n_l: int,
@@ -79,6 +80,7 @@ def replay(
         seed=seed,
         estimator=estimator,
         turn_prior_deg=turn_prior_deg,
+        distance_prior=distance_prior or None,
     )
     url = None
     with show_skips():

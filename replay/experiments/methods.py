@@ -110,8 +110,10 @@ def joint_rows(
     n_r: int,
     n_l: int,
     rng: np.random.Generator,
+    distance_prior_rel: float | None = None,
 ) -> list[ErrorRow]:
-    """Run the joint estimator (initialized by the paper's filter) over the observations."""
+    """Run the joint estimator (initialized by the paper's filter) over the observations, with
+    a prior on each movement's length from ``distance_m`` if ``distance_prior_rel`` is given."""
     slam = make_estimator(
         "joint",
         ctx.landmarks,
@@ -120,6 +122,7 @@ def joint_rows(
         n_r=n_r,
         n_l=n_l,
         rng=rng,
+        distance_prior_rel=distance_prior_rel,
     )
     rows = []
     for k, obs in enumerate(observations, start=1):

@@ -20,6 +20,8 @@ PRIORS = ("impartial", "gaussian", "mixture")
 FRAME_CHANGES = ("sampled", "exact")
 #: the paper's Fig. 8 particle counts
 PAPER_N_L_VALUES = (50, 100, 200, 300, 500, 1000)
+#: pipeline.estimators.DEFAULT_DISTANCE_PRIOR_REL (no numpy here either; a test checks they agree)
+DEFAULT_DISTANCE_PRIOR = 0.05
 
 
 class ProtocolError(BslamError):
@@ -49,6 +51,9 @@ class Protocol:
         bearings.
     frame_change : str
         ``sampled`` (n_l random triples, O(n_l)) or ``exact`` (all n_r^3 triples, reduced).
+    distance_prior : float or None
+        The joint estimator's prior on each movement's length from its driven distance (relative
+        std; None: lengths free), as ``bslam process --distance-prior``.
     seed : int
         Run ``i`` uses seed ``seed + i`` for the trajectory, the noise and the particles.
     """
@@ -65,6 +70,7 @@ class Protocol:
     crb: bool = True
     frame_change: str = "sampled"
     seed: int = 0
+    distance_prior: float | None = DEFAULT_DISTANCE_PRIOR
 
     def __post_init__(self) -> None:
         if self.runs < 1 or self.movements < 1:
@@ -79,6 +85,8 @@ class Protocol:
         if self.frame_change not in FRAME_CHANGES:
             choices = ", ".join(FRAME_CHANGES)
             raise ProtocolError(f"unknown frame change {self.frame_change!r}; use one of {choices}")
+        if self.distance_prior is not None and not self.distance_prior > 0.0:
+            raise ProtocolError(f"distance prior std must be > 0, got {self.distance_prior}")
 
     def to_dict(self) -> dict[str, Any]:
         """The protocol as JSON-ready data (tuples become lists)."""

@@ -9,9 +9,9 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +29,9 @@ from replay.experiments.methods import (
 from replay.experiments.protocol import Protocol
 from replay.experiments.results import ErrorRow
 from replay.truth import truth_from_scenario
+
+if TYPE_CHECKING:
+    from replay.plan import MovementPlan
 
 
 @dataclass(frozen=True)
@@ -72,7 +75,11 @@ def run_one(task: RunTask) -> RunOutput:
 
     tick = time.perf_counter()
     ctx = _context(task, summary)
-    observations = observations_from_summary(summary)
+    plan = read_log_plan(log)
+    observations = [
+        replace(o, turn_rad=plan.turns_rad.get(o.index), distance_m=plan.distances_m.get(o.index))
+        for o in observations_from_summary(summary)
+    ]
     seeds = np.random.SeedSequence(task.seed).spawn(len(proto.priors) + len(proto.n_l_values))
     for i, prior in enumerate(proto.priors):
         if prior == "impartial" and proto.frame_change == "sampled":
@@ -103,14 +110,21 @@ def run_one(task: RunTask) -> RunOutput:
     tick = time.perf_counter()
     if proto.joint:
         rng = np.random.default_rng(np.random.SeedSequence(task.seed).spawn(1)[0])
-        out.rows += joint_rows(observations, ctx, n_r=proto.n_r, n_l=proto.n_l, rng=rng)
+        out.rows += joint_rows(
+            observations,
+            ctx,
+            n_r=proto.n_r,
+            n_l=proto.n_l,
+            rng=rng,
+            distance_prior_rel=proto.distance_prior,
+        )
     out.seconds["joint"] = time.perf_counter() - tick
     tick = time.perf_counter()
     if proto.batch_ls:
         out.rows += batch_ls_rows(observations, ctx)
     if proto.crb:
         truth = truth_from_scenario(task.scenario, ctx.reference)
-        keyframes = true_keyframes(log)
+        keyframes = true_keyframes(plan)
         out.rows += crb_rows(keyframes, truth.landmarks_world, ctx, _sigma_rad(task))
     out.seconds["yardsticks"] = time.perf_counter() - tick
     return out
@@ -132,13 +146,17 @@ def simulate(scenario: dict[str, Any], log: Path, *, seed: int) -> None:
     simulate_to_file(sim, log, source=scenario_path.name)
 
 
-def true_keyframes(log: Path) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """True (O1, O2) positions (m, world) of every complete movement of a simulated log."""
+def read_log_plan(log: Path) -> MovementPlan:
+    """The movement plan of a log (keyframes, commanded turns, driven distances, true poses)."""
     from data_schemas.mcap.processable import ProcessableLog
     from replay.plan import read_plan
 
     with ProcessableLog(log) as opened:
-        plan = read_plan(opened)
+        return read_plan(opened)
+
+
+def true_keyframes(plan: MovementPlan) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """True (O1, O2) positions (m, world) of every complete movement of a simulated log."""
     out = []
     for index in sorted(plan.keyframes):
         phases = plan.keyframes[index]

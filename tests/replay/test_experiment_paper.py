@@ -248,6 +248,15 @@ def test_prior_names_agree_with_the_estimator() -> None:
     assert PRIORS == PRIOR_CHOICES == RECORD_PRIORS == get_args(PriorName)
 
 
+def test_distance_prior_default_agrees_with_the_estimator() -> None:
+    from pipeline.estimators import DEFAULT_DISTANCE_PRIOR_REL
+    from replay.experiments.protocol import DEFAULT_DISTANCE_PRIOR, Protocol
+    from replay.records import MethodConfig
+
+    assert DEFAULT_DISTANCE_PRIOR == DEFAULT_DISTANCE_PRIOR_REL
+    assert Protocol().distance_prior == MethodConfig().distance_prior == DEFAULT_DISTANCE_PRIOR
+
+
 def test_tiny_arenas_experiment_reports_the_goals(tmp_path: Path) -> None:
     out = tmp_path / "arenas"
     args = ["experiment", "arenas", "--out", str(out), "--runs", "2", "--movements", "6"]
