@@ -704,11 +704,10 @@ class JointSlam:
         return used, r
 
     def _n_params(self) -> int:
-        """Free parameters the bearings determine (each distance prior fixes one, the scale
-        adds one)."""
-        n = 2 * (len(self._in_graph) - 2) + 4 * len(self._placed) - 2 * len(self._links)
-        n_distance = sum(1 for m in self._placed.values() if self._distance_m(m) is not None)
-        return n - n_distance + 1 if n_distance else n
+        """Free parameters of the keyframes and landmarks. The bearings still determine them
+        with a distance prior, whose std is loose against the lengths the bearings give: not
+        counting its share keeps the noise estimate on the safe side."""
+        return 2 * (len(self._in_graph) - 2) + 4 * len(self._placed) - 2 * len(self._links)
 
     def _jumped(self, before: dict[str, LandmarkEstimate]) -> str:
         for name, prev in before.items():

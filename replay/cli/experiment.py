@@ -12,7 +12,7 @@ import click
 
 from data_schemas.errors import BslamError
 from replay.cli.options import SEED
-from replay.cli.process import MAX_N_L, MAX_N_R
+from replay.cli.process import MAX_N_L, MAX_N_R, distance_prior_option
 from replay.experiments.protocol import (
     ALL_SWEEP_PARAMS,
     FRAME_CHANGES,
@@ -116,6 +116,7 @@ def _common(fn: Any) -> Any:
             show_default=True,
             help="sampled (O(n_l) random triples) or exact (all n_r^3 triples).",
         ),
+        distance_prior_option,
         click.option(
             "--scenario",
             default="paper",
@@ -157,6 +158,7 @@ def _protocol(kw: dict[str, Any], runs: int, **extra: Any) -> Any:
         frame_change=kw["frame_change"],
         seed=kw["seed"],
         n_l_movements=min(3, kw["movements"]),
+        distance_prior=kw["distance_prior"] or None,
         **extra,
     )
 

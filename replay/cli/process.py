@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from replay.cli.follow import end_of_follow, follow_options
-from replay.cli.options import SEED
+from replay.cli.options import SEED, FiniteFloat
 from replay.experiments.protocol import DEFAULT_DISTANCE_PRIOR, PRIORS
 
 if TYPE_CHECKING:
@@ -37,6 +37,17 @@ estimator_option = click.option(
     "paper: the paper's filter alone.",
 )
 
+distance_prior_option = click.option(
+    "--distance-prior",
+    "distance_prior",
+    type=FiniteFloat(min=0.0),
+    default=DEFAULT_DISTANCE_PRIOR,
+    show_default=True,
+    metavar="FRACTION",
+    help="Joint estimator: trust each movement's driven distance (odometry, else the "
+    "commanded distance) to this relative std; 0 leaves the lengths free.",
+)
+
 
 def method_options(fn: click.decorators.FC) -> click.decorators.FC:
     """The estimator options shared by process, replay and demo."""
@@ -52,16 +63,7 @@ def method_options(fn: click.decorators.FC) -> click.decorators.FC:
                 help="Joint estimator: trust each commanded turn in place to this std "
                 "(degrees) [default: turns free].",
             ),
-            click.option(
-                "--distance-prior",
-                "distance_prior",
-                type=click.FloatRange(0.0),
-                default=DEFAULT_DISTANCE_PRIOR,
-                show_default=True,
-                metavar="FRACTION",
-                help="Joint estimator: trust each movement's driven distance (odometry, else the "
-                "commanded distance) to this relative std; 0 leaves the lengths free.",
-            ),
+            distance_prior_option,
             click.option(
                 "--prior",
                 type=click.Choice(PRIOR_CHOICES),

@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from replay.cli import COMMANDS, cli
+from replay.experiments.protocol import DEFAULT_DISTANCE_PRIOR
 from replay.experiments.results import read_results
 from replay.experiments.stats import movement_curve
 
@@ -55,6 +56,7 @@ def test_tiny_paper_experiment_end_to_end(tmp_path: Path) -> None:
     methods = {r.method for r in res.rows}
     assert methods == {"impartial", "gaussian", "mixture", "joint", "batch_ls", "crb"}
     assert len([r for r in res.rows if r.method == "joint"]) == 3 * 4 * 2
+    assert res.config["protocol"]["distance_prior"] == DEFAULT_DISTANCE_PRIOR
     # shape: 3 runs x 4 movements x 2 scored landmarks per method (n_l sweep: 3 movements)
     main = [r for r in res.rows if r.method == "impartial" and r.n_l == 100]
     assert len(main) == 3 * 4 * 2
@@ -96,6 +98,8 @@ def run_cli(args: list[str]) -> tuple[int, str]:
         (["--n-r", "1"], "'--n-r'"),
         (["--seed", "-1"], "'--seed': -1 is not in the range x>=0"),
         (["--frame-change", "fast"], "'fast' is not one of 'sampled', 'exact'"),
+        (["--distance-prior", "-0.1"], "'--distance-prior': -0.1 is not in the range x>=0"),
+        (["--distance-prior", "nan"], "'--distance-prior'"),
     ],
 )
 def test_paper_usage_error_is_exit_2_and_creates_nothing(
@@ -255,6 +259,10 @@ def test_distance_prior_default_agrees_with_the_estimator() -> None:
 
     assert DEFAULT_DISTANCE_PRIOR == DEFAULT_DISTANCE_PRIOR_REL
     assert Protocol().distance_prior == MethodConfig().distance_prior == DEFAULT_DISTANCE_PRIOR
+    # the summary says what made the map: the prior when the joint estimator used it
+    assert MethodConfig().summary(0.05)["distance_prior"] == DEFAULT_DISTANCE_PRIOR
+    assert "distance_prior" not in MethodConfig(distance_prior=None).summary(0.05)
+    assert "distance_prior" not in MethodConfig(estimator="paper").summary(0.05)
 
 
 def test_tiny_arenas_experiment_reports_the_goals(tmp_path: Path) -> None:
