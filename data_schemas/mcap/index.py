@@ -6,21 +6,20 @@ mcap's ``Writer``) writes is followed by one message index per channel (log time
 chunk's records), so :class:`LogIndex` knows where each message lies without reading a chunk.
 
 A pass (:meth:`LogIndex.messages`) reads, in mcap's log-time order (log time, then position in
-the file), only the chunks that hold a wanted message. Each chunk is loaded by a worker thread,
-two chunks ahead of the caller, so that the copying, the CRC and the decompression (which all
-release the GIL) run on a second core while the caller uses the messages of the chunk before:
+the file), only the chunks that hold a wanted message. Each chunk is checked by a worker thread,
+up to two chunks ahead of the caller, so that the CRC and the decompression (which release the GIL)
+run on a second core while the caller copies out the messages of the chunk before:
 
-* a stored chunk is read piece by piece straight into the messages handed out (one copy from
-  the file, no mapping): the pieces between wanted messages are read in blocks; the CRC is
-  taken over every piece in file order and the record headers are walked;
-* a compressed chunk (zstd, lz4) is read whole, decompressed once, its CRC taken over the
-  uncompressed records, which are walked once.
+* a stored chunk is checked where it lies in the mapped file (its CRC, then a walk over its
+  record headers); each wanted message is then copied once, from the mapping, by the caller;
+* a compressed chunk (zstd, lz4) is decompressed once, its CRC taken over the uncompressed
+  records, which are walked once; messages are cut from them.
 
 No message of a chunk is handed out before that chunk has passed its checks: its CRC, and its
 message indexes against the records it holds. A damaged chunk raises :class:`CorruptChunksError`
-when the pass reaches it (messages of earlier chunks may have been handed out by then). A chunk
-checked once is trusted by later passes, which then read only the messages they want. Logs
-without message indexes are left to the checking scan: :meth:`LogIndex.of` returns None.
+when the pass reaches it (messages of earlier chunks may have been handed out by then). A stored
+chunk checked once is trusted by later passes, which only walk its record headers. Logs without
+message indexes are left to the checking scan: :meth:`LogIndex.of` returns None.
 """
 
 from __future__ import annotations
@@ -29,7 +28,7 @@ import mmap
 import os
 import struct
 import threading
-from collections.abc import Callable, Collection, Container, Iterator, Sequence
+from collections.abc import Collection, Container, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import IO
@@ -51,8 +50,9 @@ from data_schemas.mcap.layout import (
     STORED_CHUNK_HEADER,
 )
 
-#: Threads that load chunks (read, decompress, CRC, walk) for a pass.
-_LOAD_THREADS = 2
+#: Threads that check chunks (CRC, decompression, walk) for a pass, beside the caller's: one
+#: (measured on 2 cores: a second one competes with the caller and costs more than it saves).
+_LOAD_THREADS = 1
 #: Chunks checked ahead of the one the caller reads from.
 _AHEAD = 2
 #: Where one message lies: log time, file offset of its chunk, offset in the chunk's records,
@@ -114,7 +114,6 @@ class LogIndex:
         for entries in self._entries.values():
             entries.sort()
         self._checked: set[int] = set()  # offsets of chunks that checked out
-        self._read: Callable[[int, int], bytes] | None = None
         self._lock = threading.Lock()
         self._mapping: mmap.mmap | None = None
         self._view: memoryview | None = None  # the mapped file, for checking stored chunks
@@ -168,11 +167,10 @@ class LogIndex:
         each with what is wrong.
 
         ``chunks``: file offsets of the chunks to check (default all); each chunk is checked
-        once, two at a time.
+        once.
         """
         todo = [c for c in (self._chunks if chunks is None else chunks) if c not in self._checked]
-        with ThreadPoolExecutor(max_workers=_LOAD_THREADS) as pool:
-            results = [chunk.problem for chunk in pool.map(self._load, todo)]
+        results = [self._load(chunk_at).problem for chunk_at in todo]
         bad = []
         for chunk_at, problem in zip(todo, results, strict=True):
             if problem:
@@ -187,7 +185,6 @@ class LogIndex:
 
     def close(self) -> None:
         """Release the file's mapping (the stream stays open: it is the caller's)."""
-        self._read = None
         if self._view is not None:
             self._view.release()
             self._view = None
@@ -229,7 +226,7 @@ class LogIndex:
         loaded: dict[int, _Loaded] = {}
         pending: dict[int, Future[_Loaded]] = {}
         submitted = 0
-        read = self._reader()
+        data = self._data()
         with ThreadPoolExecutor(max_workers=_LOAD_THREADS) as pool:
             try:
                 for log_time_ns, chunk_at, offset, channel_id in wanted:
@@ -243,7 +240,7 @@ class LogIndex:
                             raise CorruptChunksError([(self._chunks[chunk_at], chunk.problem)])
                         self._checked.add(chunk_at)
                     message = chunk.message(
-                        read, chunk_at, offset, (channel_id, log_time_ns), publish_times_ns
+                        data, chunk_at, offset, (channel_id, log_time_ns), publish_times_ns
                     )
                     left[chunk_at] -= 1
                     if not left[chunk_at]:
@@ -255,35 +252,21 @@ class LogIndex:
                     future.cancel()
 
     # ------------------------------------------------------------------ loading chunks
-    def _reader(self) -> Callable[[int, int], bytes]:
-        """``read(offset, size)``: bytes of the file (fewer at its end), safe across threads."""
-        if self._read is None:
-            try:
-                fd = self._stream.fileno()
-            except (AttributeError, OSError, ValueError):  # an in-memory stream: its bytes
-                self._stream.seek(0)
-                view = memoryview(self._stream.read())
-                self._read = lambda offset, size: bytes(view[offset : offset + size])
-            else:
-                self._read = lambda offset, size: os.pread(fd, size, offset)
-        return self._read
-
     def _load(self, chunk_at: int) -> _Loaded:
         """Check one chunk and walk its records (a loading thread's job).
 
         A compressed chunk comes back decompressed. A stored chunk is checked and walked where
-        it lies in the mapped file; its messages' data is read later, by the caller. A stored
-        chunk checked by an earlier pass is only walked (its record headers).
+        it lies in the mapped file; the caller copies its messages from there. A stored chunk
+        checked by an earlier pass is only walked (its record headers).
         """
         chunk = self._chunks[chunk_at]
         check = chunk_at not in self._checked or bool(chunk.compression)
-        self._reader()
         try:
+            records = None
             if chunk.compression:
-                records: bytes | None = self._decompressed(chunk)
-                heads, whole = _walk(records)  # type: ignore[arg-type]
+                records = self._decompressed(chunk)
+                heads, whole = _walk(records)
             else:
-                records = None
                 heads, whole = self._stored_heads(chunk, check)
             entries = [(offset, head[1], head[3]) for offset, head in heads.items()]
             if check and not (whole and entries == self._entries[chunk_at]):
@@ -294,31 +277,12 @@ class LogIndex:
 
     def _decompressed(self, chunk: ChunkIndex) -> bytes:
         """The records of a compressed chunk, decompressed, their CRC checked."""
-        record = self._reader()(chunk.chunk_start_offset, chunk.chunk_length)
-        if len(record) < chunk.chunk_length:
+        data = self._data()
+        start = chunk.chunk_start_offset
+        if start + chunk.chunk_length > len(data):
             raise _Damaged("cut short")
-        view = memoryview(record)
-        opcode, length = RECORD_HEADER.unpack_from(view)
-        _, _, size, crc = CHUNK_FIELDS.unpack_from(view, RECORD_HEADER.size)
-        at = RECORD_HEADER.size + CHUNK_FIELDS.size
-        (n,) = _U32.unpack_from(view, at)
-        name = bytes(view[at + 4 : at + 4 + n])
-        at += 4 + n
-        if (
-            opcode != Opcode.CHUNK
-            or RECORD_HEADER.size + length != len(record)
-            or name != chunk.compression.encode()
-            or at + 8 > len(record)
-            or at + 8 + _U64.unpack_from(view, at)[0] != len(record)
-        ):
-            raise _Damaged("its header does not match the summary's chunk index")
-        try:
-            records = decompress(chunk.compression, view[at + 8 :], size)
-        except DecompressionError as exc:
-            raise _Damaged(str(exc)) from None
-        if crc and isal_zlib.crc32(records) != crc:
-            raise _Damaged("CRC mismatch")
-        return records
+        with data[start : start + chunk.chunk_length] as view:
+            return _decompressed(view, chunk.compression)
 
     def _stored_heads(self, chunk: ChunkIndex, check: bool) -> tuple[dict[int, _Head], bool]:
         """The message heads of a stored chunk, walked where it lies in the mapped file (no
@@ -367,14 +331,15 @@ class _Loaded:
 
     def message(
         self,
-        read: Callable[[int, int], bytes],
+        data: memoryview,
         chunk_at: int,
         offset: int,
         indexed: tuple[int, int],
         publish_times_ns: Container[int] | None,
     ) -> Message | None:
         """The message at ``offset``, which its index says is ``indexed`` (channel id, log
-        time); None if its publish time is not wanted."""
+        time), copied from the checked records (``data``: the mapped file, for a stored
+        chunk); None if its publish time is not wanted."""
         head = self.heads.get(offset)
         if head is None or (head[1], head[3]) != indexed:
             at = chunk_at + STORED_CHUNK_HEADER.size + offset
@@ -385,20 +350,47 @@ class _Loaded:
         if publish_times_ns is not None and publish_time not in publish_times_ns:
             return None
         if self.records is not None:
-            data = self.records[offset + MESSAGE_HEADER.size : offset + RECORD_HEADER.size + length]
+            start = offset + MESSAGE_HEADER.size
+            payload = self.records[start : offset + RECORD_HEADER.size + length]
         else:
             at = chunk_at + STORED_CHUNK_HEADER.size + offset
-            size = length - MESSAGE_FIELDS
-            data = read(at + MESSAGE_HEADER.size, size)
-            if len(data) < size:
+            stop = at + RECORD_HEADER.size + length
+            if stop > len(data):
                 raise DamagedLogError(f"the message at byte {at} is cut short")
+            payload = bytes(data[at + MESSAGE_HEADER.size : stop])
         return Message(
             channel_id=channel,
             sequence=sequence,
             log_time=log_time,
             publish_time=publish_time,
-            data=data,
+            data=payload,
         )
+
+
+def _decompressed(record: memoryview, compression: str) -> bytes:
+    """The records of a compressed chunk record, decompressed, their CRC checked."""
+    opcode, length = RECORD_HEADER.unpack_from(record)
+    _, _, size, crc = CHUNK_FIELDS.unpack_from(record, RECORD_HEADER.size)
+    at = RECORD_HEADER.size + CHUNK_FIELDS.size
+    (n,) = _U32.unpack_from(record, at)
+    name = bytes(record[at + 4 : at + 4 + n])
+    at += 4 + n
+    if (
+        opcode != Opcode.CHUNK
+        or RECORD_HEADER.size + length != len(record)
+        or name != compression.encode()
+        or at + 8 > len(record)
+        or at + 8 + _U64.unpack_from(record, at)[0] != len(record)
+    ):
+        raise _Damaged("its header does not match the summary's chunk index")
+    try:
+        with record[at + 8 :] as payload:
+            records = decompress(compression, payload, size)
+    except DecompressionError as exc:
+        raise _Damaged(str(exc)) from None
+    if crc and isal_zlib.crc32(records) != crc:
+        raise _Damaged("CRC mismatch")
+    return records
 
 
 def _walk(records: bytes | memoryview) -> tuple[dict[int, _Head], bool]:

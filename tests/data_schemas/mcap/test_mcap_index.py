@@ -161,7 +161,7 @@ def test_damaged_chunk_is_refused_before_any_of_its_messages(compression: Compre
     assert loaded.problem == ""
     inside = {
         loaded.message(  # type: ignore[union-attr]
-            clean_index._reader(), target.chunk_start_offset, offset, (channel, t), None
+            clean_index._data(), target.chunk_start_offset, offset, (channel, t), None
         ).sequence
         for offset, channel, t in clean_index._entries[target.chunk_start_offset]
     }
