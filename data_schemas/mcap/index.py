@@ -24,6 +24,7 @@ message indexes are left to the checking scan: :meth:`LogIndex.of` returns None.
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 import os
 import struct
@@ -184,13 +185,18 @@ class LogIndex:
         return {channel for _, channel, _ in self._entries.get(chunk.chunk_start_offset, ())}
 
     def close(self) -> None:
-        """Release the file's mapping (the stream stays open: it is the caller's)."""
-        if self._view is not None:
-            self._view.release()
-            self._view = None
-        if self._mapping is not None:
-            self._mapping.close()
-            self._mapping = None
+        """Release the file's mapping (the stream stays open: it is the caller's).
+
+        A pass still under way (a caller's error left its generator open, its checking thread
+        still running) keeps the pages it uses: they are unmapped once it lets go.
+        """
+        view, mapping = self._view, self._mapping
+        self._view = self._mapping = None
+        with contextlib.suppress(BufferError):
+            if view is not None:
+                view.release()
+            if mapping is not None:
+                mapping.close()
 
     def messages(
         self,

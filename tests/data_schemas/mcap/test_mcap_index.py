@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -245,3 +246,23 @@ def test_indexes_missing_a_channel_are_left_to_mcap() -> None:
     assert LogIndex.of(io.BytesIO(bytes(data)), summary) is not None
     data[summary.chunk_indexes[1].message_index_offsets[2]] = 0x7F  # no longer an index record
     assert LogIndex.of(io.BytesIO(bytes(data)), summary) is None
+
+
+def test_an_error_inside_a_pass_is_not_hidden_by_close(tmp_path: Path) -> None:
+    """The caller fails while a pass is open (its checking thread may still hold a chunk of the
+    mapped file): closing the index neither raises nor pulls the pages from under the thread."""
+    data = _recorded()
+    path = tmp_path / "log.mcap"
+    path.write_bytes(data)
+    with path.open("rb") as f:
+        index = LogIndex.of(f, make_reader(f).get_summary())
+        assert index is not None
+        held = index._data()[100:200]  # what a checking thread holds while it works
+        with pytest.raises(KeyError, match="the caller's own error"):
+            try:
+                for _ in index.messages(index.channel_ids):
+                    raise KeyError("the caller's own error")
+            finally:
+                index.close()
+        assert bytes(held) == data[100:200]
+        held.release()
