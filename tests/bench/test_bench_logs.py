@@ -105,26 +105,36 @@ def folder() -> Iterator[Path]:
 
 
 _CPU: dict[str, float] = {}  # median process CPU time (all threads) of the last cases run
+_CALLER: dict[str, float] = {}  # median CPU time of the calling thread alone
 
 
 def _alternate(cases: dict[str, Callable[[], Any]]) -> dict[str, float]:
     times: dict[str, list[float]] = {name: [] for name in cases}
     cpu: dict[str, list[float]] = {name: [] for name in cases}
+    caller: dict[str, list[float]] = {name: [] for name in cases}
     for _ in range(ROUNDS):
         for name, fn in cases.items():
             start, start_cpu = time.perf_counter(), time.process_time()
+            start_caller = time.thread_time()
             fn()
             times[name].append(time.perf_counter() - start)
             cpu[name].append(time.process_time() - start_cpu)
+            caller[name].append(time.thread_time() - start_caller)
     _CPU.clear()
     _CPU.update({name: statistics.median(t) for name, t in cpu.items()})
+    _CALLER.clear()
+    _CALLER.update({name: statistics.median(t) for name, t in caller.items()})
     return {name: statistics.median(t) for name, t in times.items()}
 
 
 def _report(title: str, medians: dict[str, float], yardstick: str) -> None:
-    print(f"\n{title} (median of {ROUNDS}, ratio to {yardstick}; CPU time of all threads)")
+    print(
+        f"\n{title} (median of {ROUNDS}, ratio to {yardstick}; CPU time of all threads and of "
+        "the calling thread)"
+    )
     for name, t in medians.items():
         cpu = f"  cpu {1000 * _CPU[name]:7.1f} ms" if name in _CPU else ""
+        cpu += f", caller {1000 * _CALLER[name]:7.1f} ms" if name in _CALLER else ""
         print(f"  {name:<38} {1000 * t:9.1f} ms  x{t / medians[yardstick]:.3f}{cpu}")
 
 
