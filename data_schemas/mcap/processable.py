@@ -1,10 +1,12 @@
 """Open a finished bearing-slam log for processing: checks first, then messages in log-time order.
 
 No message is used before its chunk is checked: its CRC, and its message indexes against its
-records. A log the recorder wrote (stored chunks, full summary) is read in place through
-:class:`data_schemas.mcap.index.LogIndex`, which checks the chunks each pass reads before the
-pass yields anything; anything else (compressed or unchunked files, no summary or an incomplete
-one, damage with ``skip_corrupt``) is checked whole at open by
+records. A log whose chunks all have message indexes (what the recorder and mcap's ``Writer``
+write, stored or compressed) is read through :class:`data_schemas.mcap.index.LogIndex`: each
+pass loads the chunks it needs once, a second core reading, decompressing and checking the next
+chunks while the caller uses the messages of the one before, and a damaged chunk stops the pass
+before any of its messages is handed out. Anything else (unchunked files, no summary or an
+incomplete one, damage with ``skip_corrupt``) is checked whole at open by
 :class:`data_schemas.mcap.scan.LogScan` and read through it. Every
 problem a user can cause is one line: not MCAP, unfinished or corrupt (``bslam recover``, or
 ``--skip-corrupt`` to process the rest), no session metadata, no camera calibration, a known
@@ -174,13 +176,14 @@ class ProcessableLog(Closing):
                 self._channel_names[channel_id] = (channel.topic, schema_name)
 
     def _checked_index(self, summary: Summary | None) -> LogIndex | None:
-        """The in-place index of a log the recorder wrote (None: read it by a scan).
+        """The index of a log whose chunks are all indexed (None: read it by a scan).
 
-        The index checks the chunks each pass reads before it yields anything. With
+        The index checks each chunk a pass reads before it yields any of its messages. With
         ``skip_corrupt`` every chunk is checked now instead, and a damaged log is left to the
-        scan, which skips its damaged parts.
+        scan, which skips its damaged parts. A summary without channels or without metadata
+        indexes (metadata could lie anywhere) is left to the scan too.
         """
-        if summary is None or not summary.channels:
+        if summary is None or not summary.channels or not summary.metadata_indexes:
             return None
         index = LogIndex.of(self._file, summary)
         if index is None or any(c not in summary.channels for c in index.channel_ids):
@@ -246,13 +249,14 @@ class ProcessableLog(Closing):
     ) -> Iterator[LogMessage]:
         """Messages of ``topics`` with ``start_ns <= log_time < end_ns``, in log-time order.
 
-        ``publish_times_ns``, if given, keeps only messages whose publish time is in it (in a
-        log the recorder wrote, the others' data is not even read).
+        ``publish_times_ns``, if given, keeps only messages whose publish time is in it (in
+        stored chunks an earlier pass checked, the others' data is not even read).
 
         Raises
         ------
         CorruptLogError
-            A chunk this pass reads is damaged (raised before the pass yields anything).
+            A chunk this pass reads is damaged (raised before any of its messages is yielded;
+            a log checked whole at open raises at open instead).
         """
         names = self._channel_names
         ids = [i for i, (t, _) in names.items() if topics is None or t in topics]
@@ -294,7 +298,7 @@ class ProcessableLog(Closing):
         end_ns: int | None,
         publish_times_ns: Container[int] | None,
     ) -> Iterator[Message]:
-        """Messages read in place if the log allows, else by a scan sorted by log time."""
+        """Messages through the log's index if it has one, else by a scan sorted by log time."""
         if self._index is not None:
             yield from self._index.messages(
                 ids, start_ns=start_ns, end_ns=end_ns, publish_times_ns=publish_times_ns

@@ -49,10 +49,10 @@ from mcap.records import (
     Schema,
     Statistics,
 )
-from mcap.stream_reader import get_chunk_data_stream
 
 from data_schemas.closing import Closing
 from data_schemas.errors import LogError, NotMcapError
+from data_schemas.mcap.compression import COMPRESSIONS, DecompressionError, decompress
 from data_schemas.mcap.layout import (
     CHUNK_FIELDS,
     INDEX_ENTRY,
@@ -65,7 +65,6 @@ from data_schemas.mcap.layout import (
 
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
-_COMPRESSIONS = ("", "zstd", "lz4")
 #: Records that may stand at the top level of an MCAP file (the rest: damage or private).
 _TOP_LEVEL = frozenset(int(o) for o in Opcode)
 #: A plausible record start: a known opcode and a length below 2**40 (used to resynchronise).
@@ -507,31 +506,32 @@ class LogScan(Closing):
         at += 4 + n
         (records_length,) = _U64.unpack_from(data, at)
         at += 8
-        if compression not in _COMPRESSIONS or at + records_length != stop:
+        if compression not in COMPRESSIONS or at + records_length != stop:
             return None
         return start_ns, end_ns, crc, at, compression
 
     def _chunk_ok(self, body: int, stop: int) -> bool:
-        try:
-            chunk = _parse(Opcode.CHUNK, self._data[body:stop])
-            get_chunk_data_stream(chunk, validate_crc=True)  # type: ignore[arg-type]
-        except Exception as exc:  # zstd/lz4 raise their own types on damaged data
-            if isinstance(exc, _PARSE_ERRORS) or _decompression_error(exc):
-                return False
-            raise
-        return True
+        fields = self._chunk_fields(body, stop)
+        if fields is None:
+            return False
+        if fields[4] == "":
+            crc = fields[2]
+            return crc == 0 or isal_zlib.crc32(self._data[fields[3] : stop]) == crc
+        return self._decompressed(body, stop) is not None
 
     def _decompressed(self, body: int, stop: int) -> bytes | None:
         """The records of a compressed chunk, None if they do not decompress to its CRC."""
+        fields = self._chunk_fields(body, stop)
+        if fields is None:
+            return None
+        _, _, crc, records_at, compression = fields
+        size = _U64.unpack_from(self._data, body + 16)[0]
         try:
-            chunk = _parse(Opcode.CHUNK, self._data[body:stop])
-            stream, length = get_chunk_data_stream(chunk, validate_crc=True)  # type: ignore[arg-type]
-            records: bytes = stream.read(length)
-        except Exception as exc:  # zstd/lz4 raise their own types on damaged data
-            if isinstance(exc, _PARSE_ERRORS) or _decompression_error(exc):
-                return None
-            raise
-        return records
+            with memoryview(self._data) as whole, whole[records_at:stop] as payload:
+                records = decompress(compression, payload, size)
+        except DecompressionError:
+            return None
+        return records if crc == 0 or isal_zlib.crc32(records) == crc else None
 
     def _chunk(self, pos: int, body: int, stop: int) -> Iterator[Record]:
         fields = self._chunk_fields(body, stop)
@@ -786,7 +786,3 @@ def _consumes(opcode: int, body: bytes | mmap.mmap) -> bool:
     raw = io.BytesIO(bytes(body))
     cls.read(ReadDataStream(raw))  # type: ignore[attr-defined]
     return raw.tell() == len(body)
-
-
-def _decompression_error(exc: Exception) -> bool:
-    return type(exc).__module__.split(".")[0] in ("zstandard", "lz4", "_lz4", "mcap")

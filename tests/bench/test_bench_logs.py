@@ -17,6 +17,7 @@ Run: ``python -m pytest tests/bench/test_bench_logs.py -s``.
 
 from __future__ import annotations
 
+import os
 import statistics
 import tempfile
 import time
@@ -34,7 +35,7 @@ from mcap.writer import CompressionType, Writer
 from data_schemas.calibration import UnwrappedCalibration
 from data_schemas.mcap.chunks import McapChunkWriter
 from data_schemas.mcap.index import LogIndex
-from data_schemas.mcap.layout import MESSAGE_FIELDS, MESSAGE_HEADER
+from data_schemas.mcap.layout import MESSAGE_FIELDS, MESSAGE_HEADER, STORED_CHUNK_HEADER
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.recover import recover_log
@@ -103,24 +104,51 @@ def folder() -> Iterator[Path]:
         yield Path(d)
 
 
+_CPU: dict[str, float] = {}  # median process CPU time (all threads) of the last cases run
+_CALLER: dict[str, float] = {}  # median CPU time of the calling thread alone
+
+
 def _alternate(cases: dict[str, Callable[[], Any]]) -> dict[str, float]:
     times: dict[str, list[float]] = {name: [] for name in cases}
+    cpu: dict[str, list[float]] = {name: [] for name in cases}
+    caller: dict[str, list[float]] = {name: [] for name in cases}
     for _ in range(ROUNDS):
         for name, fn in cases.items():
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
+            start_caller = time.thread_time()
             fn()
             times[name].append(time.perf_counter() - start)
+            cpu[name].append(time.process_time() - start_cpu)
+            caller[name].append(time.thread_time() - start_caller)
+    _CPU.clear()
+    _CPU.update({name: statistics.median(t) for name, t in cpu.items()})
+    _CALLER.clear()
+    _CALLER.update({name: statistics.median(t) for name, t in caller.items()})
     return {name: statistics.median(t) for name, t in times.items()}
 
 
 def _report(title: str, medians: dict[str, float], yardstick: str) -> None:
-    print(f"\n{title} (median of {ROUNDS}, ratio to {yardstick})")
+    print(
+        f"\n{title} (median of {ROUNDS}, ratio to {yardstick}; CPU time of all threads and of "
+        "the calling thread)"
+    )
     for name, t in medians.items():
-        print(f"  {name:<34} {1000 * t:9.1f} ms  x{t / medians[yardstick]:.3f}")
+        cpu = f"  cpu {1000 * _CPU[name]:7.1f} ms" if name in _CPU else ""
+        cpu += f", caller {1000 * _CALLER[name]:7.1f} ms" if name in _CALLER else ""
+        print(f"  {name:<38} {1000 * t:9.1f} ms  x{t / medians[yardstick]:.3f}{cpu}")
 
 
 def _checked(path: Path) -> int:
     with ProcessableLog(path) as log:
+        return sum(len(m.data) for m in log.messages())
+
+
+def _checks_off(path: Path) -> int:
+    """The same reader with every chunk taken as checked: reading in place without the checks."""
+    with ProcessableLog(path) as log:
+        index = log._index
+        assert index is not None
+        index._checked.update(index._chunks)
         return sum(len(m.data) for m in log.messages())
 
 
@@ -132,10 +160,10 @@ def _unchecked(path: Path, publish_times_ns: set[int] | None = None) -> int:
         index = LogIndex.of(f, summary)
         assert index is not None
         total = 0
-        for _, records_at, offset, _ in sorted(
+        for _, chunk_at, offset, _ in sorted(
             p for c in index.channel_ids for p in index._places[c]
         ):
-            f.seek(records_at + offset)
+            f.seek(chunk_at + STORED_CHUNK_HEADER.size + offset)
             fields = MESSAGE_HEADER.unpack(f.read(MESSAGE_HEADER.size))
             if publish_times_ns is None or fields[5] in publish_times_ns:
                 total += len(f.read(fields[1] - MESSAGE_FIELDS))
@@ -152,35 +180,83 @@ def _keyframes(path: Path, checked: bool) -> int:
     return _unchecked(path, keys)
 
 
-def _mcap(path: Path) -> int:
+def _mcap(path: Path, validate_crcs: bool = False) -> int:
+    """mcap's indexed reader (it checks no CRC unless asked)."""
     with path.open("rb") as f:
-        return sum(len(m.data) for _, _, m in make_reader(f).iter_messages(log_time_order=True))
+        reader = make_reader(f, validate_crcs=validate_crcs)
+        return sum(len(m.data) for _, _, m in reader.iter_messages(log_time_order=True))
+
+
+def _rewrite_lz4(source: Path, out: Path) -> None:
+    """``source`` written again by mcap's ``Writer`` with lz4 chunks (ours writes zstd only)."""
+    with source.open("rb") as f, out.open("wb") as o:
+        writer = Writer(o, chunk_size=4 << 20, compression=CompressionType.LZ4)
+        writer.start()
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, record.metadata)
+        ids: dict[int, int] = {}
+        for schema, channel, m in reader.iter_messages(log_time_order=False):
+            if channel.id not in ids:
+                sid = writer.register_schema(schema.name, schema.encoding, schema.data)
+                ids[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, sid
+                )
+            writer.add_message(ids[channel.id], m.log_time, m.data, m.publish_time, m.sequence)
+        writer.finish()
 
 
 def test_bench_read(folder: Path) -> None:
-    stored, zstd = folder / "stored.mcap", folder / "zstd.mcap"
+    stored, zstd, lz4 = folder / "stored.mcap", folder / "zstd.mcap", folder / "lz4.mcap"
     _write(stored, "bgr8", "")
     _write(zstd, "bgr8", "zstd")
-    assert _checked(stored) == _unchecked(stored) == _mcap(stored) == _checked(zstd)
+    _rewrite_lz4(stored, lz4)
+    size = _checked(stored)
+    assert size == _unchecked(stored) == _checks_off(stored) == _mcap(stored)
+    assert size == _checked(zstd) == _mcap(zstd) == _checked(lz4) == _mcap(lz4)
     assert _keyframes(stored, True) == _keyframes(stored, False)
     medians = _alternate(
         {
             "in place, unchecked (before)": lambda: _unchecked(stored),
+            "same reader, checks off": lambda: _checks_off(stored),
             "in place, CRC + index checked": lambda: _checked(stored),
             "mcap indexed reader": lambda: _mcap(stored),
+            "mcap indexed reader, CRCs checked": lambda: _mcap(stored, True),
             "every 10th frame, unchecked (before)": lambda: _keyframes(stored, False),
             "every 10th frame, checked": lambda: _keyframes(stored, True),
-            "zstd log: checking scan": lambda: _checked(zstd),
+            "zstd log: ours, checked": lambda: _checked(zstd),
             "zstd log: mcap indexed reader": lambda: _mcap(zstd),
+            "zstd log: mcap, CRCs checked": lambda: _mcap(zstd, True),
+            "lz4 log: ours, checked": lambda: _checked(lz4),
+            "lz4 log: mcap indexed reader": lambda: _mcap(lz4),
+            "lz4 log: mcap, CRCs checked": lambda: _mcap(lz4, True),
         }
     )
     _report(f"read {FRAMES} bgr8 frames {WIDTH}x{HEIGHT}", medians, "in place, unchecked (before)")
-    # reading every byte: the CRC costs about as much as the copy (reported, not asserted);
-    # reading the keyframes, as process does, the goal is to stay within 10% of before
-    full = medians["in place, CRC + index checked"] / medians["in place, unchecked (before)"]
-    sparse = medians["every 10th frame, checked"] / medians["every 10th frame, unchecked (before)"]
-    print(f"  checked / unchecked: every frame x{full:.2f}, every 10th frame x{sparse:.2f}")
-    assert sparse <= 1.10, f"checked keyframe reading is {sparse:.2f}x the unchecked one"
+    ratio = {
+        "every frame": medians["in place, CRC + index checked"]
+        / medians["in place, unchecked (before)"],
+        "every frame, to checks off": medians["in place, CRC + index checked"]
+        / medians["same reader, checks off"],
+        "every 10th frame": medians["every 10th frame, checked"]
+        / medians["every 10th frame, unchecked (before)"],
+        "zstd, to mcap": medians["zstd log: ours, checked"]
+        / medians["zstd log: mcap indexed reader"],
+        "zstd, to mcap checking CRCs": medians["zstd log: ours, checked"]
+        / medians["zstd log: mcap, CRCs checked"],
+        "lz4, to mcap": medians["lz4 log: ours, checked"] / medians["lz4 log: mcap indexed reader"],
+        "lz4, to mcap checking CRCs": medians["lz4 log: ours, checked"]
+        / medians["lz4 log: mcap, CRCs checked"],
+    }
+    print("  ratios: " + ", ".join(f"{k} x{v:.2f}" for k, v in ratio.items()))
+    print(f"  load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    # the checks of a full read run on a second core: the ratio depends on one being free
+    # (reported, not asserted); reading the keyframes, as process does, stays within 10%
+    assert ratio["every 10th frame"] <= 1.10, (
+        f"keyframe reading is x{ratio['every 10th frame']:.2f}"
+    )
 
 
 def test_bench_write_and_recover(folder: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -88,20 +89,98 @@ def test_publish_time_filter_keeps_only_those() -> None:
     assert got == [m for m in everything if m[3] in chosen]
 
 
-def test_compressed_or_unindexed_logs_are_left_to_mcap() -> None:
-    for compression, indexes in (
-        (CompressionType.ZSTD, IndexType.ALL),
-        (CompressionType.NONE, IndexType.ALL & ~IndexType.MESSAGE),
-    ):
-        out = io.BytesIO()
-        writer = Writer(out, compression=compression, index_types=indexes)
-        writer.start()
-        schema = writer.register_schema("s", "jsonschema", b"{}")
-        channel = writer.register_channel("/a", "json", schema)
-        writer.add_message(channel, 1, b"{}", 1)
-        writer.finish()
-        out.seek(0)
-        assert LogIndex.of(out, make_reader(out).get_summary()) is None
+def test_unindexed_logs_are_left_to_the_scan() -> None:
+    out = io.BytesIO()
+    writer = Writer(out, index_types=IndexType.ALL & ~IndexType.MESSAGE)
+    writer.start()
+    schema = writer.register_schema("s", "jsonschema", b"{}")
+    channel = writer.register_channel("/a", "json", schema)
+    writer.add_message(channel, 1, b"{}", 1)
+    writer.finish()
+    out.seek(0)
+    assert LogIndex.of(out, make_reader(out).get_summary()) is None
+
+
+def _rewritten(data: bytes, compression: CompressionType, chunk_size: int = 60_000) -> bytes:
+    """``data`` written again by mcap's ``Writer`` with compressed chunks."""
+    out = io.BytesIO()
+    writer = Writer(out, compression=compression, chunk_size=chunk_size)
+    writer.start()
+    reader = make_reader(io.BytesIO(data))
+    ids: dict[int, int] = {}
+    for schema, channel, message in reader.iter_messages():
+        if channel.id not in ids:
+            sid = writer.register_schema(schema.name, schema.encoding, schema.data)
+            ids[channel.id] = writer.register_channel(channel.topic, "json", sid)
+        writer.add_message(
+            ids[channel.id], message.log_time, message.data, message.publish_time, message.sequence
+        )
+    writer.finish()
+    return out.getvalue()
+
+
+@pytest.mark.parametrize("compression", [CompressionType.ZSTD, CompressionType.LZ4])
+def test_compressed_log_gives_what_mcap_gives(compression: CompressionType) -> None:
+    data = _rewritten(_recorded(), compression)
+    index, reader = _index(data)
+    assert len(reader.get_summary().chunk_indexes) > 4  # several compressed chunks
+    assert {c.compression for c in reader.get_summary().chunk_indexes} == {compression.name.lower()}
+    ids = list(reader.get_summary().channels)
+    for topics in (["/a", "/b", "/c"], ["/b"]):
+        chosen = [i for i in ids if reader.get_summary().channels[i].topic in topics]
+        expected = _tuples(m for _, _, m in reader.iter_messages(topics, log_time_order=True))
+        assert _tuples(index.messages(chosen)) == expected
+    everything = _tuples(index.messages(ids))
+    chosen_times = {everything[i][3] for i in (1, 30, 99)}
+    assert _tuples(index.messages(ids, publish_times_ns=chosen_times)) == [
+        m for m in everything if m[3] in chosen_times
+    ]
+
+
+@pytest.mark.parametrize("compression", [CompressionType.NONE, CompressionType.ZSTD])
+def test_damaged_chunk_is_refused_before_any_of_its_messages(compression: CompressionType) -> None:
+    """One byte changed in the third of several chunks: the messages of the chunks before it
+    are read, then the pass stops; nothing of the damaged chunk comes out."""
+    clean = (
+        _recorded() if compression == CompressionType.NONE else _rewritten(_recorded(), compression)
+    )
+    summary = make_reader(io.BytesIO(clean)).get_summary()
+    assert summary is not None
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    target = chunks[2]
+    data = bytearray(clean)
+    at = target.chunk_start_offset + target.chunk_length - 40  # inside its last record
+    data[at] ^= 0x10
+    index, _ = _index(bytes(data))
+    channels = list(summary.channels)
+    got: list[Any] = []
+    with pytest.raises(CorruptChunksError, match=rf"chunk at byte {target.chunk_start_offset}: "):
+        got.extend(index.messages(channels))
+    assert got  # the chunks before it were read
+    clean_index, _ = _index(clean)
+    loaded = clean_index._load(target.chunk_start_offset)
+    assert loaded.problem == ""
+    inside = {
+        loaded.message(  # type: ignore[union-attr]
+            clean_index._data(), target.chunk_start_offset, offset, (channel, t), None
+        ).sequence
+        for offset, channel, t in clean_index._entries[target.chunk_start_offset]
+    }
+    assert inside and not {m.sequence for m in got} & inside
+    assert [c for c, _ in index.verify()] == [target]
+
+
+def test_index_disagreeing_with_an_intact_chunk_is_damage() -> None:
+    """The chunk's CRC is fine but its message index lists a log time its message lacks."""
+    data = bytearray(_recorded())
+    summary = make_reader(io.BytesIO(bytes(data))).get_summary()
+    assert summary is not None
+    chunk = summary.chunk_indexes[1]
+    entry = chunk.message_index_offsets[1] + 9 + 6  # first entry of channel 1's index
+    data[entry : entry + 8] = (12_345).to_bytes(8, "little")  # its log time
+    index, _ = _index(bytes(data))
+    with pytest.raises(CorruptChunksError, match="message index disagrees with its records"):
+        list(index.messages(list(summary.channels)))
 
 
 def test_uncompressed_mcap_writer_log_is_read_in_place() -> None:
@@ -167,3 +246,23 @@ def test_indexes_missing_a_channel_are_left_to_mcap() -> None:
     assert LogIndex.of(io.BytesIO(bytes(data)), summary) is not None
     data[summary.chunk_indexes[1].message_index_offsets[2]] = 0x7F  # no longer an index record
     assert LogIndex.of(io.BytesIO(bytes(data)), summary) is None
+
+
+def test_an_error_inside_a_pass_is_not_hidden_by_close(tmp_path: Path) -> None:
+    """The caller fails while a pass is open (its checking thread may still hold a chunk of the
+    mapped file): closing the index neither raises nor pulls the pages from under the thread."""
+    data = _recorded()
+    path = tmp_path / "log.mcap"
+    path.write_bytes(data)
+    with path.open("rb") as f:
+        index = LogIndex.of(f, make_reader(f).get_summary())
+        assert index is not None
+        held = index._data()[100:200]  # what a checking thread holds while it works
+        with pytest.raises(KeyError, match="the caller's own error"):
+            try:
+                for _ in index.messages(index.channel_ids):
+                    raise KeyError("the caller's own error")
+            finally:
+                index.close()
+        assert bytes(held) == data[100:200]
+        held.release()

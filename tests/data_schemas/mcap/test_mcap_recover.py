@@ -150,13 +150,18 @@ def test_processable_log_refuses_or_skips_a_corrupt_chunk(
     data[chunk.chunk_start_offset + chunk.chunk_length - 12] ^= 0x01  # in its last message
     broken = tmp_path / "broken.mcap"
     broken.write_bytes(bytes(data))
+    with ProcessableLog(finished) as whole:
+        everything = [(m.topic, m.log_time_ns, m.data) for m in whole.messages()]
+    got: list[tuple[str, int, bytes]] = []
     with (
         ProcessableLog(broken) as log,
         pytest.raises(CorruptLogError, match=r"is corrupt: chunk at bytes .*--skip-corrupt"),
     ):
-        next(log.messages())  # before the first message of the pass
-    with ProcessableLog(finished) as whole:
-        everything = [(m.topic, m.log_time_ns, m.data) for m in whole.messages()]
+        got.extend((m.topic, m.log_time_ns, m.data) for m in log.messages())
+    # the pass stops where it reaches the damaged chunk, before any of its messages
+    inside = [m for m in everything if chunk.message_start_time <= m[1] <= chunk.message_end_time]
+    assert got == everything[: len(got)] and not set(got) & set(inside)
+    assert (len(got) > 0) == (chunk != chunks[0])
     with ProcessableLog(broken, skip_corrupt=True) as log:
         [skipped] = log.skipped
         assert (skipped.start_ns, skipped.end_ns) == (
@@ -164,7 +169,6 @@ def test_processable_log_refuses_or_skips_a_corrupt_chunk(
             chunk.message_end_time,
         )
         kept = [(m.topic, m.log_time_ns, m.data) for m in log.messages()]
-    inside = [m for m in everything if chunk.message_start_time <= m[1] <= chunk.message_end_time]
     assert inside and kept == [m for m in everything if m not in inside]
     s = log_summary(broken)
     assert s.state == "corrupt" and [d.start for d in s.damage] == [chunk.chunk_start_offset]
