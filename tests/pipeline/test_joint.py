@@ -92,7 +92,7 @@ def _score(seeds: range) -> dict[str, float]:
     }
 
 
-@pytest.mark.slow  # about 8 s; test_paper_arena_is_at_least_as_good_as_least_squares is fast
+@pytest.mark.slow  # 15 arenas, about 8 s
 def test_varied_arenas_match_batch_least_squares_and_are_calibrated() -> None:
     # 15 random arenas (fixed seeds): other reference pairs, sizes, landmark counts, noise.
     # Where least squares converges, the joint map is the same optimum plus the shared
@@ -115,6 +115,7 @@ def test_varied_arenas_goals_over_100_runs() -> None:
     assert 0.75 <= s["coverage"] <= 0.85
 
 
+@pytest.mark.slow  # 8 runs, about 3 s (fast: test_one_wrong_bearing_does_not_drag_the_map)
 def test_paper_arena_is_at_least_as_good_as_least_squares() -> None:
     joint, ls = [], []
     for seed in range(8):
