@@ -16,7 +16,7 @@ from functools import cache
 from importlib import resources
 from typing import Any, Literal
 
-from data_schemas.errors import UnknownSchemaError
+from data_schemas.errors import ImageError, UnknownSchemaError
 
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
@@ -92,6 +92,23 @@ IMAGE_SCHEMA: dict[ImageEncoding, str] = {
 
 #: Image schemas accepted on ``/camera/panorama``.
 IMAGE_SCHEMAS = tuple(IMAGE_SCHEMA.values())
+
+
+def image_encoding(schema: str) -> ImageEncoding:
+    """The encoding a frame of schema ``schema`` is stored in (:data:`IMAGE_SCHEMA` inverted).
+
+    Raises
+    ------
+    ImageError
+        ``schema`` is not one of :data:`IMAGE_SCHEMAS`.
+    """
+    for encoding, name in IMAGE_SCHEMA.items():
+        if name == schema:
+            return encoding
+    raise ImageError(
+        f"/camera/panorama: schema {schema!r} is not an image schema; expected one of "
+        + ", ".join(IMAGE_SCHEMAS)
+    )
 
 
 def _schema_file(name: str) -> str:

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from data_schemas.errors import EstimationError, ImageError
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
+from data_schemas.registry import IMAGE_SCHEMA, image_encoding
 from data_schemas.session import Session, shared_classes, shared_reference_problem
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import BearingExtractor, Detection, decode_frame
@@ -61,8 +62,11 @@ logger = logging.getLogger("bslam.replay")
 logger.addHandler(logging.NullHandler())  # quiet unless the application asks (CLI: show_skips)
 
 
-def decode_image(msg: dict[str, Any]) -> tuple[NDArray[np.uint8], bytes | None]:
-    """A ``foxglove.CompressedImage`` (png) or ``foxglove.RawImage`` (bgr8) frame message.
+def decode_image(schema: str, msg: dict[str, Any]) -> tuple[NDArray[np.uint8], bytes | None]:
+    """A frame message, decoded as its channel's schema says (``registry.IMAGE_SCHEMA``).
+
+    ``foxglove.CompressedImage`` holds a PNG file (its ``format`` says ``png``);
+    ``foxglove.RawImage`` holds ``bgr8`` pixels (``encoding``, ``width``, ``height``, ``step``).
 
     Returns
     -------
@@ -70,17 +74,30 @@ def decode_image(msg: dict[str, Any]) -> tuple[NDArray[np.uint8], bytes | None]:
         The decoded frame.
     png : bytes or None
         The PNG file as logged (CompressedImage), None for a raw frame.
+
+    Raises
+    ------
+    ImageError
+        Not an image schema, data that is not base64, or a frame its decoder refuses (lossy,
+        another schema's encoding, corrupt, wrong size).
     """
+    encoding = image_encoding(schema)
+    stated = str(msg.get("format" if encoding == "png" else "encoding", ""))
+    # a known encoding under another schema: the frame contradicts its channel
+    home = next((s for e, s in IMAGE_SCHEMA.items() if e == stated.lower()), schema)
+    if home != schema:
+        raise ImageError(
+            f"/camera/panorama: a {schema} frame cannot hold {stated!r} frames (a {home} can)"
+        )
     try:
         data = pybase64.b64decode(msg["data"], validate=True)  # SIMD; 3x the stdlib's speed
     except (KeyError, ValueError) as exc:
         raise ImageError(f"/camera/panorama: frame data is not base64 ({exc})") from None
-    if "format" in msg:
-        fmt = str(msg["format"])
-        return decode_frame(data, fmt), data if fmt.lower() == "png" else None
+    if encoding == "png":
+        return decode_frame(data, stated), data
     image = decode_frame(
         data,
-        str(msg.get("encoding", "")),
+        stated,
         width=int(msg["width"]),
         height=int(msg["height"]),
         step=int(msg["step"]) if "step" in msg else None,
@@ -210,13 +227,13 @@ class Runner:
             return
         self.state.last_log_time_ns, self.state.last_timestamp_ns = msg.log_time_ns, t_ns
         doc = msg.decode()
-        self._frame(doc, ns_from_stamp(doc["timestamp"]), msg.log_time_ns, keys)
+        self._frame(msg.schema, doc, ns_from_stamp(doc["timestamp"]), msg.log_time_ns, keys)
 
     def _late_keyframe(self, index: int, phase: str, msg: LogMessage) -> None:
         """A movement message naming a frame handled before it (not the recorder's order)."""
         if index in self.state.done or (index, phase) in self.state.keyframes:
             return
-        image, _ = decode_image(msg.decode())
+        image, _ = decode_image(msg.schema, msg.decode())
         detections = self.extractor.extract(image)
         self.state.keyframes[(index, phase)] = _Keyframe(
             msg.publish_time_ns, msg.log_time_ns, detections
@@ -225,9 +242,14 @@ class Runner:
             self._movement(index)
 
     def _frame(
-        self, doc: dict[str, Any], t_ns: int, log_time_ns: int, keys: list[tuple[int, str]]
+        self,
+        schema: str,
+        doc: dict[str, Any],
+        t_ns: int,
+        log_time_ns: int,
+        keys: list[tuple[int, str]],
     ) -> None:
-        image, png = decode_image(doc)
+        image, png = decode_image(schema, doc)
         if self.images:
             found, masks = self.extractor.extract_with_masks(image)
         else:

@@ -44,7 +44,8 @@ def _project_text_files() -> list[Path]:
 
 def test_design_and_method_are_cited_inside_the_repository() -> None:
     # the design and the method live in docs/; nothing may send a reader outside the repository
-    outside = ("DESIGN" + ".md", "METHOD" + ".md")  # spelled apart so this file is no hit
+    # spelled apart so this file is no hit; the last is the workplace the project was built in
+    outside = ("DESIGN" + ".md", "METHOD" + ".md", "/" + "work/")
     hits = [
         f"{p.relative_to(ROOT)}: {name}"
         for p in _project_text_files()

@@ -486,8 +486,8 @@ def main(argv: list[str] | None = None) -> None:
         noise=ActuationNoise(args.turn_noise, args.distance_noise),
     )
     with fake.serve_pty() as server:
-        print(f"simulated Khepera on {server.path} (Ctrl-C to stop)", flush=True)
-        try:
+        try:  # from the announcement on: a Ctrl-C right after it still ends cleanly
+            print(f"simulated Khepera on {server.path} (Ctrl-C to stop)", flush=True)
             while True:
                 clock.sleep(3600)
         except KeyboardInterrupt:

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import click
 
 from replay.cli.options import SEED, FiniteFloat
 from replay.cli.recording import frame_options, live_options
+
+if TYPE_CHECKING:
+    from data_schemas.registry import ImageEncoding
 
 
 def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tuple[float, float]:
@@ -99,7 +103,7 @@ def record(
     turn_deg: float | None,
     seed: int | None,
     frame_rate_hz: float,
-    encoding: str,
+    encoding: ImageEncoding,  # click.Choice(list(IMAGE_SCHEMA))
     png_level: int,
     chunk_compression: str,
     force: bool,
@@ -139,7 +143,7 @@ def record(
         },
         settings=RecordSettings(
             frame_rate_hz=frame_rate_hz,
-            encoding="png" if encoding == "png" else "bgr8",
+            encoding=encoding,
             png_level=png_level,
             chunk_compression="" if chunk_compression == "none" else chunk_compression,
         ),

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
 
 from replay.cli.options import SEED, FiniteFloat
 from replay.cli.recording import frame_options, live_options
+
+if TYPE_CHECKING:
+    from data_schemas.registry import ImageEncoding
 
 
 @click.command("simulate")
@@ -45,7 +50,7 @@ def simulate(
     out: str,
     seed: int | None,
     frame_rate_hz: float,
-    encoding: str,
+    encoding: ImageEncoding,  # click.Choice(list(IMAGE_SCHEMA))
     png_level: int,
     turn_noise: float,
     distance_noise: float,
@@ -77,7 +82,7 @@ def simulate(
     settings = SimSettings(
         RecordSettings(
             frame_rate_hz=frame_rate_hz,
-            encoding="png" if encoding == "png" else "bgr8",
+            encoding=encoding,
             png_level=png_level,
             chunk_compression="" if chunk_compression == "none" else chunk_compression,
         ),

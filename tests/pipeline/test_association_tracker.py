@@ -14,6 +14,7 @@ def runs() -> list:  # type: ignore[type-arg]
     return [run_synthetic(8, seed) for seed in SEEDS]
 
 
+@pytest.mark.slow  # three 20-movement runs, about 2 s
 def test_named_detections_are_correct_and_nothing_is_invented(runs: list) -> None:  # type: ignore[type-arg]
     for run in runs:
         assert len(run.estimates_fl) <= 8
@@ -24,6 +25,7 @@ def test_named_detections_are_correct_and_nothing_is_invented(runs: list) -> Non
         assert run.correct_share() >= 0.98
 
 
+@pytest.mark.slow  # three 20-movement runs, about 2 s
 def test_most_landmarks_are_named_within_twenty_movements(runs: list) -> None:  # type: ignore[type-arg]
     assert sum(len(r.estimates_fl) for r in runs) >= 0.85 * 8 * len(runs)
 

@@ -97,7 +97,7 @@ RANGE_CASES = [
     ("unwrapped", (720, 120), 2.6),
     ("unwrapped", (960, 160), 2.6),
     ("omni", (255, 176), 1.5),
-    ("omni", (480, 480), 2.6),
+    pytest.param("omni", (480, 480), 2.6, marks=pytest.mark.slow),  # about 1 s
 ]
 
 
@@ -177,7 +177,12 @@ def test_a_lone_patch_smaller_than_the_floor_is_never_a_landmark(
 
 
 @pytest.mark.parametrize(
-    ("model", "size"), [("unwrapped", (255, 176)), ("unwrapped", (720, 120)), ("omni", (480, 480))]
+    ("model", "size"),
+    [
+        ("unwrapped", (255, 176)),
+        ("unwrapped", (720, 120)),
+        pytest.param("omni", (480, 480), marks=pytest.mark.slow),  # about 1 s
+    ],
 )
 def test_false_detections_on_frames_with_coloured_clutter(
     model: str, size: tuple[int, int]

@@ -92,6 +92,7 @@ def _score(seeds: range) -> dict[str, float]:
     }
 
 
+@pytest.mark.slow  # 15 arenas, about 8 s
 def test_varied_arenas_match_batch_least_squares_and_are_calibrated() -> None:
     # 15 random arenas (fixed seeds): other reference pairs, sizes, landmark counts, noise.
     # Where least squares converges, the joint map is the same optimum plus the shared
@@ -114,6 +115,7 @@ def test_varied_arenas_goals_over_100_runs() -> None:
     assert 0.75 <= s["coverage"] <= 0.85
 
 
+@pytest.mark.slow  # 8 runs, about 3 s (fast: test_one_wrong_bearing_does_not_drag_the_map)
 def test_paper_arena_is_at_least_as_good_as_least_squares() -> None:
     joint, ls = [], []
     for seed in range(8):
@@ -143,7 +145,9 @@ def _edit(run: SimulatedRun, movement: int, name: str, delta_rad: float | None) 
     return replace(run, observations=obs)
 
 
-@pytest.mark.parametrize("seed", [3, 5, 8])
+@pytest.mark.parametrize(
+    "seed", [pytest.param(3, marks=pytest.mark.slow), 5, pytest.param(8, marks=pytest.mark.slow)]
+)
 def test_one_wrong_bearing_does_not_drag_the_map(seed: int) -> None:
     # a wrong detection 25 deg off: the map must be the one without that bearing
     run = simulate_bearings(10, np.random.default_rng(seed), eps_rad=EPS)

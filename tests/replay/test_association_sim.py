@@ -14,7 +14,12 @@ from alike_scoring import Score, score_log
 from replay.experiments.run import simulate
 
 
-@pytest.fixture(scope="module", params=[("unwrapped", 4), ("omni", 4)], ids=lambda p: p[0])
+@pytest.fixture(
+    scope="module",
+    # the omni run takes about 5 s: CI runs it with -m slow
+    params=[("unwrapped", 4), pytest.param(("omni", 4), marks=pytest.mark.slow)],
+    ids=lambda p: p[0],
+)
 def scored(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Score:
     camera, seed = request.param
     log = tmp_path_factory.mktemp(f"alike_{camera}") / "run.mcap"

@@ -18,12 +18,15 @@ import numpy as np
 import pytest
 
 from data_schemas.codec import validate
+from data_schemas.errors import NotMcapError
 from data_schemas.mcap.info import log_summary
 from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.recover import recover_log
 from data_schemas.registry import TOPICS
 from recorder.clock import SystemClock
 from recorder.sim.fake_khepera import FakeKhepera
+
+pytestmark = pytest.mark.xdist_group("processes")  # real processes and signals, one at a time
 
 ROOT = Path(__file__).resolve().parents[2]
 H, W = 48, 96
@@ -94,8 +97,11 @@ def _wait_for_messages(out: Path, proc: subprocess.Popen[str], n: int) -> None:
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         assert proc.poll() is None, proc.communicate()
-        if out.exists() and log_summary(out).message_count >= n:
-            return
+        try:
+            if out.exists() and log_summary(out).message_count >= n:
+                return
+        except NotMcapError:
+            pass  # just created: its magic bytes are not written yet
         time.sleep(0.1)
     raise AssertionError("the recorder wrote nothing")
 
