@@ -11,9 +11,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from pipeline.association import Associator, MovementAssociation
+from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.estimators import make_estimator
-from pipeline.joint.geometry import MovementPose
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import simulate_bearings
 
@@ -110,10 +109,9 @@ def run_synthetic(
         )
         pose = None
         if res.status == "ok" and res.o1_fl is not None and res.o2_fl is not None:
-            o1, o2 = res.o1_fl.mean(axis=0), res.o2_fl.mean(axis=0)
-            d = o2 - o1
-            pose = MovementPose(o1, math.atan2(d[1], d[0]), float(np.hypot(*d)))
-        assoc.hypothesize(a, pose, slam.estimates)
+            pose = pose_between(res.o1_fl, res.o2_fl)
+        path = zip(slam.used_movements, slam.trajectory_fl, strict=True)  # type: ignore[attr-defined]
+        assoc.hypothesize(a, pose, slam.estimates, {k: pose_between(*ends) for k, ends in path})
         for name, hist in a.history.items():
             slam.add_history(name, hist)  # type: ignore[attr-defined]
         out.results.append(a)
