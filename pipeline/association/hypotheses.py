@@ -69,11 +69,14 @@ def fit(
 
     With ``guess_fl`` (the point of the hypothesis the rays grew from) the point is the
     least-squares point of all rays, each weighted by ``1 / range^2`` from the guess (twice),
-    instead of the robust search of :func:`pipeline.joint.geometry.intersect_rays`.
+    instead of the robust search of :func:`pipeline.joint.geometry.intersect_rays`; two rays
+    meet where they cross.
     """
     origins = np.array([r.origin_fl for r in rays], np.float64)
     dirs = np.array([r.direction_rad for r in rays], np.float64)
     tol = FIT_TOL_EPS * eps_rad
+    if guess_fl is None and len(rays) == 2:  # two rays: their crossing, whatever the weights
+        guess_fl = origins.mean(axis=0)
     point = _least_squares(origins, dirs, guess_fl) if guess_fl is not None else None
     if point is None:
         found = intersect_rays(origins, dirs, tol)

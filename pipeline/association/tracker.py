@@ -48,6 +48,9 @@ MAX_MISSES = 2
 MAX_AGE = 8
 #: A placement whose robust residual exceeds this many eps is not trusted for association.
 PLACEMENT_MAX_EPS = 2.0
+#: Rays are placed anew when the estimator moved their keyframe this much (FL) or turned it
+#: by a tenth of the bearing noise std.
+MOVED_FL = 1e-3
 #: Live hypotheses kept per class (the best seen from most positions, then by RMS ray error).
 MAX_HYPOTHESES = 200
 #: Distinct lines of sight (through its point, differing by more than :data:`DISTINCT_EPS`
@@ -465,15 +468,16 @@ class Associator:
         """Name hypotheses seen often enough, within the class's catalog count; drop those
         that are a named landmark seen again (its detection fell outside its gate)."""
         named = self._known(label, mapped)
-        kept = [h for h in self.hypotheses[label] if not any(self._same(h, e) for _, e in named)]
+        estimates = [e for _, e in named]
+        kept = [h for h in self.hypotheses[label] if not self._same(h, *estimates)]
         self.hypotheses[label] = kept
+        lines = {id(h): _positions(h, self._distinct) for h in self.hypotheses[label]}
         ready = [
             h
             for h in self.hypotheses[label]
-            if _positions(h, self._distinct) >= CONFIRM_POSITIONS
-            and len(h.movements) >= CONFIRM_MOVEMENTS
+            if lines[id(h)] >= CONFIRM_POSITIONS and len(h.movements) >= CONFIRM_MOVEMENTS
         ]
-        ready.sort(key=lambda h: (-_positions(h, self._distinct), h.rms_rad))
+        ready.sort(key=lambda h: (-lines[id(h)], h.rms_rad))
         taken: set[tuple[int, int, int]] = set()
         for h in ready:
             rivals = [
@@ -481,7 +485,7 @@ class Associator:
                 for o in self.hypotheses[label]
                 if o is not h
                 and o.keys & h.keys
-                and _rivals(o, h, self._distinct)
+                and _rivals(o, h, lines[id(o)], lines[id(h)])
                 and not self._same(o, LandmarkEstimate(h.point_fl, h.cov_fl))
             ]  # one that fits its point is the same landmark with a ray more or less
             if h.keys & taken or rivals:
@@ -511,6 +515,8 @@ class Associator:
             if not any(r.movement in trajectory for r in h.rays):
                 return h
             rays = [_on(r, trajectory.get(r.movement)) for r in h.rays]
+            if all(_close(a, b, self.sigma_rad) for a, b in zip(rays, h.rays, strict=True)):
+                return h
             refit = fit(h.label, rays, self.eps_rad, self.sigma_rad, h.point_fl)
             if refit is not None:
                 refit.misses, refit.born = h.misses, h.born
@@ -521,20 +527,23 @@ class Associator:
         for name, h in list(self.unmapped.items()):
             self.unmapped[name] = moved(h) or h
 
-    def _same(self, h: Hypothesis, e: LandmarkEstimate) -> bool:
-        """Whether every ray of ``h`` is a bearing of ``e`` (within the gate of its predicted
-        bearing from the ray's keyframe): then ``h`` is that landmark seen again."""
-        for r in h.rays:
-            pred, std = self._predict(
-                e.mean_fl[None, :],
-                e.cov_fl[None, :, :],
-                np.asarray(r.origin_fl),
-                r.direction_rad - r.bearing_rad,
-                0.0,
-            )
-            if (float(wrap_rad(r.bearing_rad - pred[0])) / float(std[0])) ** 2 > GATE_CHI2:
-                return False
-        return True
+    def _same(self, h: Hypothesis, *named: LandmarkEstimate) -> bool:
+        """Whether every ray of ``h`` is a bearing of one of ``named`` (within the gate of its
+        predicted bearing from the ray's keyframe): then ``h`` is that landmark seen again."""
+        k, m = len(h.rays), len(named)
+        if m == 0:
+            return False
+        bearings = np.array([r.bearing_rad for r in h.rays])
+        heads = np.array([r.direction_rad for r in h.rays]) - bearings
+        pred, std = predict_bearings(  # rays x named, flattened ray-major
+            np.repeat(np.array([r.origin_fl for r in h.rays]), m, axis=0),
+            np.repeat(heads, m),
+            np.tile(np.array([e.mean_fl for e in named]), (k, 1)),
+            np.tile(np.array([e.cov_fl for e in named]), (k, 1, 1)),
+            bearing_var_rad=2.0 * self.sigma_rad**2,
+        )
+        d2 = ((wrap_rad(np.repeat(bearings, m) - pred) / std) ** 2).reshape(k, m)
+        return bool(np.any(np.all(d2 <= GATE_CHI2, axis=0)))
 
 
 def pose_between(o1_fl: NDArray[np.float64], o2_fl: NDArray[np.float64]) -> MovementPose:
@@ -543,6 +552,15 @@ def pose_between(o1_fl: NDArray[np.float64], o2_fl: NDArray[np.float64]) -> Move
     o2 = np.asarray(o2_fl, np.float64).reshape(-1, 2).mean(axis=0)
     d = o2 - o1
     return MovementPose(o1, math.atan2(d[1], d[0]), max(float(np.hypot(*d)), 1e-6))
+
+
+def _close(a: Ray, b: Ray, sigma_rad: float) -> bool:
+    """Whether two placements of one ray differ by less than :data:`MOVED_FL` and a tenth of
+    ``sigma_rad``."""
+    return (
+        math.dist(a.origin_fl, b.origin_fl) < MOVED_FL
+        and abs(a.direction_rad - b.direction_rad) < 0.1 * sigma_rad
+    )
 
 
 def _on(ray: Ray, pose: MovementPose | None) -> Ray:
@@ -595,9 +613,9 @@ def _positions(h: Hypothesis, min_rad: float) -> int:
     return len(kept)
 
 
-def _rivals(o: Hypothesis, h: Hypothesis, min_rad: float) -> bool:
-    """Whether ``o`` still disputes ``h`` (see :data:`RIVAL_LEAD`, :data:`RIVAL_RMS_RATIO`)."""
-    po, ph = _positions(o, min_rad), _positions(h, min_rad)
+def _rivals(o: Hypothesis, h: Hypothesis, po: int, ph: int) -> bool:
+    """Whether ``o``, seen along ``po`` lines of sight, still disputes ``h``, seen along ``ph``
+    (see :data:`RIVAL_LEAD`, :data:`RIVAL_RMS_RATIO`)."""
     if po + RIVAL_LEAD <= ph:
         return False
     return not (po <= ph and o.rms_rad >= RIVAL_RMS_RATIO * h.rms_rad)
