@@ -51,7 +51,8 @@ PLACEMENT_MAX_EPS = 2.0
 #: Rays are placed anew when the estimator moved their keyframe this much (FL) or turned it
 #: by a tenth of the bearing noise std.
 MOVED_FL = 1e-3
-#: Live hypotheses kept per class (the best seen from most positions, then by RMS ray error).
+#: Live hypotheses kept per class (the best seen along most lines of sight, then by RMS ray
+#: error).
 MAX_HYPOTHESES = 200
 #: Distinct lines of sight (through its point, differing by more than :data:`DISTINCT_EPS`
 #: eps) and movements a hypothesis needs to be confirmed.
@@ -61,8 +62,8 @@ DISTINCT_EPS = 2.0
 #: A named landmark whose predicted bearing is less certain than this (std, in eps) is too
 #: poorly placed to gate detections: reported, left out of the assignment.
 MAX_PRED_STD_EPS = 2.0
-#: A hypothesis sharing a ray with another is confirmed only when seen from this many more
-#: keyframe positions than it.
+#: A hypothesis sharing a ray with another is confirmed only when seen along this many more
+#: lines of sight than it.
 RIVAL_LEAD = 2
 #: ... or from as many, with an RMS ray error this many times smaller.
 RIVAL_RMS_RATIO = 2.0
@@ -439,7 +440,7 @@ class Associator:
                         grown.append(h)
                 else:
                     grown.append(h)  # several detections in its gate: wait for a clearer view
-            grown.sort(key=lambda h: (-_positions(h, self._distinct), h.rms_rad))
+            grown.sort(key=lambda h: (-_lines_of_sight(h, self._distinct), h.rms_rad))
             hyps = grown[:MAX_HYPOTHESES]
         self.hypotheses[label] = hyps
         return [[j for j in free[end] if j not in used[end]] for end in (0, 1)]
@@ -471,7 +472,7 @@ class Associator:
         estimates = [e for _, e in named]
         kept = [h for h in self.hypotheses[label] if not self._same(h, *estimates)]
         self.hypotheses[label] = kept
-        lines = {id(h): _positions(h, self._distinct) for h in self.hypotheses[label]}
+        lines = {id(h): _lines_of_sight(h, self._distinct) for h in self.hypotheses[label]}
         ready = [
             h
             for h in self.hypotheses[label]
@@ -527,12 +528,23 @@ class Associator:
         for name, h in list(self.unmapped.items()):
             self.unmapped[name] = moved(h) or h
 
+    def _ray_fits(self, r: Ray, e: LandmarkEstimate) -> bool:
+        """Whether ray ``r`` is within the gate of the bearing of ``e`` predicted from its
+        keyframe (one ray of :meth:`_same`, in scalars)."""
+        dx, dy = float(e.mean_fl[0]) - r.origin_fl[0], float(e.mean_fl[1]) - r.origin_fl[1]
+        r2 = max(dx * dx + dy * dy, 1e-12)
+        jx, jy = -dy / r2, dx / r2
+        c = e.cov_fl
+        var = jx * jx * c[0, 0] + 2 * jx * jy * c[0, 1] + jy * jy * c[1, 1] + 2 * self.sigma_rad**2
+        err = math.remainder(math.atan2(dy, dx) - r.direction_rad, math.tau)
+        return err * err <= GATE_CHI2 * float(var)
+
     def _same(self, h: Hypothesis, *named: LandmarkEstimate) -> bool:
         """Whether every ray of ``h`` is a bearing of one of ``named`` (within the gate of its
         predicted bearing from the ray's keyframe): then ``h`` is that landmark seen again."""
         k, m = len(h.rays), len(named)
-        if m == 0:
-            return False
+        if m == 0 or not any(self._ray_fits(h.rays[-1], e) for e in named):
+            return False  # the last ray alone rules them out (cheap, no arrays)
         bearings = np.array([r.bearing_rad for r in h.rays])
         heads = np.array([r.direction_rad for r in h.rays]) - bearings
         pred, std = predict_bearings(  # rays x named, flattened ray-major
@@ -599,7 +611,7 @@ def _place_chained(
     return MovementPose(np.asarray(o1_fl, np.float64), heading, t), pos_std
 
 
-def _positions(h: Hypothesis, min_rad: float) -> int:
+def _lines_of_sight(h: Hypothesis, min_rad: float) -> int:
     """Distinct lines of sight of a hypothesis: keyframes whose lines through its point (modulo
     pi: a keyframe behind the point lies on the same line) differ by more than
     ``min_rad``. Keyframes on one line of sight test nothing: any point of the
