@@ -9,16 +9,12 @@ now (:meth:`pipeline.joint.JointSlam.add_history`).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 
-import numpy as np
-
 from data_schemas.session import Session, shared_classes
-from pipeline.association import Associator, MovementAssociation
+from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.bearings import Detection
 from pipeline.estimators import Estimator
-from pipeline.joint.geometry import MovementPose
 from pipeline.slam import MovementObservation, MovementResult
 
 
@@ -78,11 +74,15 @@ class AlikeLandmarks:
         """Grow the hypotheses with the movement as the estimator placed it; name confirmed ones."""
         pose = None
         if result.status == "ok" and result.o1_fl is not None and result.o2_fl is not None:
-            o1 = np.asarray(result.o1_fl, np.float64).reshape(-1, 2).mean(axis=0)
-            o2 = np.asarray(result.o2_fl, np.float64).reshape(-1, 2).mean(axis=0)
-            d = o2 - o1
-            pose = MovementPose(o1, math.atan2(d[1], d[0]), max(float(np.hypot(*d)), 1e-6))
-        self.associator.hypothesize(assoc, pose, estimator.estimates)
+            pose = pose_between(result.o1_fl, result.o2_fl)
+        used = getattr(estimator, "used_movements", None)
+        path = getattr(estimator, "trajectory_fl", None)
+        trajectory = (
+            {k: pose_between(o1, o2) for k, (o1, o2) in zip(used, path, strict=True)}
+            if used is not None and path is not None
+            else None
+        )
+        self.associator.hypothesize(assoc, pose, estimator.estimates, trajectory)
         add_history = getattr(estimator, "add_history", None)
         for name, bearings in assoc.history.items():
             if add_history is not None:

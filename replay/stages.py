@@ -170,6 +170,13 @@ class Runner:
             raise EstimationError(f"{log.name}: {shared}")
         self.extractor = BearingExtractor(self.session.calibration, self.session.landmarks)
         alike = shared_classes(self.session.landmarks)
+        if alike and method.estimator == "paper":
+            classes = ", ".join(f"{c} ({', '.join(n)})" for c, n in alike.items())
+            raise EstimationError(
+                f"{log.name}: landmarks that look alike ({classes}) are associated with the "
+                "joint estimator only (the paper's filter cannot take a landmark's bearings "
+                "from before it was named); use --estimator joint"
+            )
         self.alike = AlikeLandmarks(self.session) if alike else None
         names = self.session.landmark_names()
         mapped = self.alike.landmarks(names) if self.alike is not None else names

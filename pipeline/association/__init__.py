@@ -10,13 +10,14 @@ docs/method.md (association).
 
 from pipeline.association.assign import Assignment, assign
 from pipeline.association.predict import predict_bearings, ray_point_cov
-from pipeline.association.tracker import Associator, MovementAssociation
+from pipeline.association.tracker import Associator, MovementAssociation, pose_between
 
 __all__ = [
     "Assignment",
     "Associator",
     "MovementAssociation",
     "assign",
+    "pose_between",
     "predict_bearings",
     "ray_point_cov",
 ]

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.angles import wrap_rad
 from pipeline.association.predict import ray_point_cov
 from pipeline.joint.geometry import intersect_rays
 
@@ -56,28 +57,64 @@ FIT_TOL_EPS = 1.0
 MIN_PARALLAX_EPS = 2.0
 
 
-def fit(label: str, rays: list[Ray], eps_rad: float, sigma_rad: float) -> Hypothesis | None:
+def fit(
+    label: str,
+    rays: list[Ray],
+    eps_rad: float,
+    sigma_rad: float,
+    guess_fl: NDArray[np.float64] | None = None,
+) -> Hypothesis | None:
     """The hypothesis through ``rays``, or None when they do not all meet ahead within
-    :data:`FIT_TOL_EPS` with a parallax of at least :data:`MIN_PARALLAX_EPS`."""
+    :data:`FIT_TOL_EPS` with a parallax of at least :data:`MIN_PARALLAX_EPS`.
+
+    With ``guess_fl`` (the point of the hypothesis the rays grew from) the point is the
+    least-squares point of all rays, each weighted by ``1 / range^2`` from the guess (twice),
+    instead of the robust search of :func:`pipeline.joint.geometry.intersect_rays`; two rays
+    meet where they cross.
+    """
     origins = np.array([r.origin_fl for r in rays], np.float64)
     dirs = np.array([r.direction_rad for r in rays], np.float64)
     tol = FIT_TOL_EPS * eps_rad
-    found = intersect_rays(origins, dirs, tol)
-    if found is None or found.parallax_rad < MIN_PARALLAX_EPS * eps_rad:
-        return None
-    d = found.point_fl - origins
+    if guess_fl is None and len(rays) == 2:  # two rays: their crossing, whatever the weights
+        guess_fl = origins.mean(axis=0)
+    point = _least_squares(origins, dirs, guess_fl) if guess_fl is not None else None
+    if point is None:
+        found = intersect_rays(origins, dirs, tol)
+        if found is None:
+            return None
+        point = found.point_fl
+    d = point - origins
     ang = np.arctan2(d[:, 1], d[:, 0])
+    if float(np.abs(wrap_rad(ang[:, None] - ang[None, :])).max()) < MIN_PARALLAX_EPS * eps_rad:
+        return None
     err = np.abs(np.angle(np.exp(1j * (ang - dirs))))
     if np.any(err > tol):  # every ray must agree: no outlier dropped here
         return None
-    cov = ray_point_cov(found.point_fl, origins, sigma_rad)
+    cov = ray_point_cov(point, origins, sigma_rad)
     keys = {(r.movement, r.end, r.detection) for r in rays}
     return Hypothesis(
         label,
         list(rays),
-        found.point_fl,
+        point,
         cov,
         float(math.sqrt(float(np.mean(err**2)))),
         born=min(r.movement for r in rays),
         keys=keys,
     )
+
+
+def _least_squares(
+    origins_fl: NDArray[np.float64], dirs_rad: NDArray[np.float64], guess_fl: NDArray[np.float64]
+) -> NDArray[np.float64] | None:
+    """Point (2,) nearest the rays in angle: perpendicular distances weighted by
+    ``1 / range^2`` from the current point, twice from ``guess_fl``; None if degenerate."""
+    nrm = np.column_stack((-np.sin(dirs_rad), np.cos(dirs_rad)))
+    rhs = (nrm * origins_fl).sum(axis=1)
+    p = np.asarray(guess_fl, np.float64)
+    for _ in range(2):
+        w = 1.0 / np.maximum(((p - origins_fl) ** 2).sum(axis=1), 1e-9)
+        a = (nrm * w[:, None]).T @ nrm
+        if abs(float(np.linalg.det(a))) < 1e-12 * float(np.trace(a)) ** 2:
+            return None
+        p = np.linalg.solve(a, (nrm * w[:, None]).T @ rhs)
+    return p

@@ -10,7 +10,7 @@ from data_schemas.angles import wrap_rad
 
 def predict_bearings(
     origin_fl: NDArray[np.float64],
-    heading_rad: float,
+    heading_rad: float | NDArray[np.float64],
     points_fl: NDArray[np.float64],
     covs_fl: NDArray[np.float64],
     *,
@@ -21,10 +21,10 @@ def predict_bearings(
 
     Parameters
     ----------
-    origin_fl : (2,) float
-        Keyframe position, FL.
-    heading_rad : float
-        Keyframe heading, FL (bearings are relative to it).
+    origin_fl : (2,) or (n, 2) float
+        Keyframe position, FL (or one per point).
+    heading_rad : float or (n,) float
+        Keyframe heading, FL (bearings are relative to it; or one per point).
     points_fl : (n, 2) float
         Point estimates, FL.
     covs_fl : (n, 2, 2) float

@@ -7,15 +7,19 @@ For each movement (its two keyframes, O1 and O2):
 2. Per shared class, predict the bearing of each landmark already named (``red#1``, ...) from
    O1 and O2, with its std from the map covariance, the placement and the bearing noise, and
    assign the class's detections (:func:`pipeline.association.assign.assign`).
-3. Detections no named landmark explains feed the hypotheses of the class: a hypothesis whose
-   gate holds one detection gains that ray; one with none counts a miss. Pairs of detections
-   still unexplained, one from each keyframe, whose rays meet ahead of both start new
-   hypotheses (every pairing the two cones allow).
-4. A hypothesis seen from at least three keyframes of two movements with every ray within
-   ``2 eps`` of its point is confirmed: it is named ``label#k`` (k in order of confirmation)
-   while the class has fewer named landmarks than the catalog has; hypotheses sharing a ray
-   with it are dropped. A hypothesis that misses :data:`MAX_MISSES` keyframes, or is not
-   confirmed within :data:`MAX_AGE` movements, is dropped.
+3. Detections no named landmark explains, or that the assignment left contested, feed the
+   hypotheses of the class: a hypothesis whose gate holds one detection gains that ray (if
+   the rays still meet); one with none counts a miss. Pairs of detections still unexplained,
+   one from each keyframe, whose rays meet ahead of both start new hypotheses (every pairing
+   the two cones allow). Rays kept from earlier movements are placed anew on the estimator's
+   current trajectory.
+4. A hypothesis seen along three distinct lines of sight over two movements, every ray within
+   eps of its point, is confirmed unless a rival sharing one of its rays still disputes it: it
+   is named ``label#k`` (k in order of confirmation) while the class has fewer named landmarks
+   than the catalog has; hypotheses sharing a ray with it are dropped. A hypothesis whose
+   every ray is a bearing of a named landmark is that landmark seen again (dropped). A
+   hypothesis that misses :data:`MAX_MISSES` keyframes, or is not confirmed within
+   :data:`MAX_AGE` movements, is dropped.
 
 Whatever is left unresolved (contested detections, unexplained detections, a class beyond its
 catalog count, a movement that cannot be placed) is reported in the movement's result.
@@ -25,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,21 +48,25 @@ MAX_MISSES = 2
 MAX_AGE = 8
 #: A placement whose robust residual exceeds this many eps is not trusted for association.
 PLACEMENT_MAX_EPS = 2.0
-#: Distinct keyframe positions (further apart than :data:`DISTINCT_FL`) and movements a
-#: hypothesis needs to be confirmed (the start of a movement is where the last one ended).
+#: Rays are placed anew when the estimator moved their keyframe this much (FL) or turned it
+#: by a tenth of the bearing noise std.
+MOVED_FL = 1e-3
+#: Live hypotheses kept per class (the best seen along most lines of sight, then by RMS ray
+#: error).
+MAX_HYPOTHESES = 200
+#: Distinct lines of sight (through its point, differing by more than :data:`DISTINCT_EPS`
+#: eps) and movements a hypothesis needs to be confirmed.
 CONFIRM_POSITIONS = 3
 CONFIRM_MOVEMENTS = 2
-DISTINCT_FL = 0.05
+DISTINCT_EPS = 2.0
 #: A named landmark whose predicted bearing is less certain than this (std, in eps) is too
 #: poorly placed to gate detections: reported, left out of the assignment.
 MAX_PRED_STD_EPS = 2.0
-#: A hypothesis sharing a ray with another is confirmed only when seen from this many more
-#: keyframe positions than it.
+#: A hypothesis sharing a ray with another is confirmed only when seen along this many more
+#: lines of sight than it.
 RIVAL_LEAD = 2
 #: ... or from as many, with an RMS ray error this many times smaller.
 RIVAL_RMS_RATIO = 2.0
-#: A hypothesis this close (2-dof chi-square, 99.9 %) to a named landmark is that landmark.
-SAME_CHI2 = 13.8
 
 
 def slot_name(label: str, k: int) -> str:
@@ -137,6 +145,7 @@ class Associator:
         self._last: tuple[int, MovementPose] | None = None
         self._dets: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         self._free: dict[str, tuple[list[int], list[int]]] = {}
+        self._distinct = DISTINCT_EPS * self.eps_rad
 
     @property
     def names(self) -> list[str]:
@@ -260,17 +269,22 @@ class Associator:
         out: MovementAssociation,
         pose: MovementPose | None,
         mapped: Mapping[str, LandmarkEstimate],
+        trajectory: Mapping[int, MovementPose] | None = None,
     ) -> None:
         """Grow, start, confirm and drop hypotheses with this movement's free detections.
 
         ``pose`` is the movement as the estimator placed it (None: not placed; then the
-        association's own placement is used, if any), ``mapped`` the estimator's map after it.
-        Landmarks named now are in
-        ``out.confirmed`` and their bearings in ``out.history``.
+        association's own placement is used, if any), ``mapped`` the estimator's map after it,
+        ``trajectory`` the estimator's current placement of earlier movements (index -> pose):
+        rays kept from them are placed anew (early placements, from few landmarks, are
+        rough). Landmarks named now are in ``out.confirmed`` and their bearings in
+        ``out.history``.
         """
         pose = pose or out.pose
         if pose is None:
             return
+        if trajectory:
+            self._replace(trajectory)
         self._last = (out.index, pose)
         origins = (pose.o1_fl, pose.o2_fl)
         index = out.index
@@ -373,7 +387,8 @@ class Associator:
                 )
             if a.contested_landmarks or a.contested_detections:
                 out.unresolved[f"{label}@{where}"] = _contested_text(a, usable, det)
-            free.append(list(a.unexplained))
+            # contested detections may still be a landmark not named yet: hypotheses may take them
+            free.append(sorted(a.unexplained + a.contested_detections))
         return free[0], free[1]
 
     def _ray(
@@ -390,39 +405,44 @@ class Associator:
         heading: float,
         index: int,
     ) -> list[list[int]]:
-        """Add rays to hypotheses from free detections; count misses; drop stale ones."""
-        hyps = self.hypotheses[label]
+        """Add rays to hypotheses from free detections; count misses; drop stale ones.
+
+        A hypothesis whose gate holds several detections branches: one copy per detection,
+        each refitted (the rays must still meet), so rivals do not hold each other back."""
+        hyps = [h for h in self.hypotheses[label] if index - h.born <= MAX_AGE]
         used: list[set[int]] = [set(), set()]
-        if hyps:
+        for end in (0, 1):
+            cand = free[end]
+            if not hyps:
+                break
             pts = np.array([h.point_fl for h in hyps])
             covs = np.array([h.cov_fl for h in hyps])
-            for end in (0, 1):
-                cand = free[end]
-                pred, std = self._predict(pts, covs, origins[end], heading, 0.0)
-                # each hypothesis on its own: rivals share detections until one is confirmed
-                d2 = (wrap_rad(dets[end][cand][None, :] - pred[:, None]) / std[:, None]) ** 2
-                inside = d2 <= GATE_CHI2
-                for i, h in enumerate(hyps):
-                    hits = np.flatnonzero(inside[i])
-                    if hits.size == 1:
-                        j = cand[int(hits[0])]
-                        h.rays.append(
-                            self._ray(index, end, j, float(dets[end][j]), origins[end], heading)
-                        )
-                        h.keys.add((index, end, j))
-                    elif hits.size == 0:
-                        h.misses += 1
-                used[end].update(cand[j] for j in np.flatnonzero(inside.any(axis=0)))
-            kept = []
-            for h in hyps:
-                if h.misses >= MAX_MISSES or index - h.born > MAX_AGE:
+            pred, std = self._predict(pts, covs, origins[end], heading, 0.0)
+            d2 = (wrap_rad(dets[end][cand][None, :] - pred[:, None]) / std[:, None]) ** 2
+            inside = d2 <= GATE_CHI2
+            used[end].update(cand[j] for j in np.flatnonzero(inside.any(axis=0)))
+            grown: list[Hypothesis] = []
+            for i, h in enumerate(hyps):
+                hits = np.flatnonzero(inside[i])
+                if hits.size == 0:
+                    h.misses += 1
+                    if h.misses < MAX_MISSES:
+                        grown.append(h)
                     continue
-                refit = fit(label, h.rays, self.eps_rad, self.sigma_rad)
-                if refit is None:
-                    continue
-                refit.misses, refit.born = h.misses, h.born
-                kept.append(refit)
-            self.hypotheses[label] = kept
+                if hits.size == 1:
+                    j = cand[int(hits[0])]
+                    ray = self._ray(index, end, j, float(dets[end][j]), origins[end], heading)
+                    child = fit(label, [*h.rays, ray], self.eps_rad, self.sigma_rad, h.point_fl)
+                    if child is not None:
+                        child.misses, child.born = h.misses, h.born
+                        grown.append(child)
+                    else:  # in its gate but off its point: neither seen nor missed here
+                        grown.append(h)
+                else:
+                    grown.append(h)  # several detections in its gate: wait for a clearer view
+            grown.sort(key=lambda h: (-_lines_of_sight(h, self._distinct), h.rms_rad))
+            hyps = grown[:MAX_HYPOTHESES]
+        self.hypotheses[label] = hyps
         return [[j for j in free[end] if j not in used[end]] for end in (0, 1)]
 
     def _birth(
@@ -449,29 +469,26 @@ class Associator:
         """Name hypotheses seen often enough, within the class's catalog count; drop those
         that are a named landmark seen again (its detection fell outside its gate)."""
         named = self._known(label, mapped)
-        kept = []
-        for h in self.hypotheses[label]:
-            same = [
-                n
-                for n, e in named
-                if _chi2(h.point_fl - e.mean_fl, h.cov_fl + e.cov_fl) <= SAME_CHI2
-            ]
-            if not same:
-                kept.append(h)
+        estimates = [e for _, e in named]
+        kept = [h for h in self.hypotheses[label] if not self._same(h, *estimates)]
         self.hypotheses[label] = kept
+        lines = {id(h): _lines_of_sight(h, self._distinct) for h in self.hypotheses[label]}
         ready = [
             h
             for h in self.hypotheses[label]
-            if _positions(h) >= CONFIRM_POSITIONS and len(h.movements) >= CONFIRM_MOVEMENTS
+            if lines[id(h)] >= CONFIRM_POSITIONS and len(h.movements) >= CONFIRM_MOVEMENTS
         ]
-        ready.sort(key=lambda h: (-_positions(h), h.rms_rad))
+        ready.sort(key=lambda h: (-lines[id(h)], h.rms_rad))
         taken: set[tuple[int, int, int]] = set()
         for h in ready:
             rivals = [
                 o
                 for o in self.hypotheses[label]
-                if o is not h and o.keys & h.keys and _rivals(o, h)
-            ]
+                if o is not h
+                and o.keys & h.keys
+                and _rivals(o, h, lines[id(o)], lines[id(h)])
+                and not self._same(o, LandmarkEstimate(h.point_fl, h.cov_fl))
+            ]  # one that fits its point is the same landmark with a ray more or less
             if h.keys & taken or rivals:
                 continue  # its pairing is still disputed: wait for later movements
             taken |= h.keys
@@ -491,6 +508,81 @@ class Associator:
                 if r.movement == out.index:
                     out.names[label][r.end][r.detection] = name
         self.hypotheses[label] = [h for h in self.hypotheses[label] if not h.keys & taken]
+
+    def _replace(self, trajectory: Mapping[int, MovementPose]) -> None:
+        """Place the rays of hypotheses and unmapped named landmarks on ``trajectory``."""
+
+        def moved(h: Hypothesis) -> Hypothesis | None:
+            if not any(r.movement in trajectory for r in h.rays):
+                return h
+            rays = [_on(r, trajectory.get(r.movement)) for r in h.rays]
+            if all(_close(a, b, self.sigma_rad) for a, b in zip(rays, h.rays, strict=True)):
+                return h
+            refit = fit(h.label, rays, self.eps_rad, self.sigma_rad, h.point_fl)
+            if refit is not None:
+                refit.misses, refit.born = h.misses, h.born
+            return refit
+
+        for label, hyps in self.hypotheses.items():
+            self.hypotheses[label] = [m for m in map(moved, hyps) if m is not None]
+        for name, h in list(self.unmapped.items()):
+            self.unmapped[name] = moved(h) or h
+
+    def _ray_fits(self, r: Ray, e: LandmarkEstimate) -> bool:
+        """Whether ray ``r`` is within the gate of the bearing of ``e`` predicted from its
+        keyframe (one ray of :meth:`_same`, in scalars)."""
+        dx, dy = float(e.mean_fl[0]) - r.origin_fl[0], float(e.mean_fl[1]) - r.origin_fl[1]
+        r2 = max(dx * dx + dy * dy, 1e-12)
+        jx, jy = -dy / r2, dx / r2
+        c = e.cov_fl
+        var = jx * jx * c[0, 0] + 2 * jx * jy * c[0, 1] + jy * jy * c[1, 1] + 2 * self.sigma_rad**2
+        err = math.remainder(math.atan2(dy, dx) - r.direction_rad, math.tau)
+        return err * err <= GATE_CHI2 * float(var)
+
+    def _same(self, h: Hypothesis, *named: LandmarkEstimate) -> bool:
+        """Whether every ray of ``h`` is a bearing of one of ``named`` (within the gate of its
+        predicted bearing from the ray's keyframe): then ``h`` is that landmark seen again."""
+        k, m = len(h.rays), len(named)
+        if m == 0 or not any(self._ray_fits(h.rays[-1], e) for e in named):
+            return False  # the last ray alone rules them out (cheap, no arrays)
+        bearings = np.array([r.bearing_rad for r in h.rays])
+        heads = np.array([r.direction_rad for r in h.rays]) - bearings
+        pred, std = predict_bearings(  # rays x named, flattened ray-major
+            np.repeat(np.array([r.origin_fl for r in h.rays]), m, axis=0),
+            np.repeat(heads, m),
+            np.tile(np.array([e.mean_fl for e in named]), (k, 1)),
+            np.tile(np.array([e.cov_fl for e in named]), (k, 1, 1)),
+            bearing_var_rad=2.0 * self.sigma_rad**2,
+        )
+        d2 = ((wrap_rad(np.repeat(bearings, m) - pred) / std) ** 2).reshape(k, m)
+        return bool(np.any(np.all(d2 <= GATE_CHI2, axis=0)))
+
+
+def pose_between(o1_fl: NDArray[np.float64], o2_fl: NDArray[np.float64]) -> MovementPose:
+    """The movement from O1 to O2 (each (2,), or particles (m, 2) whose mean is taken; FL)."""
+    o1 = np.asarray(o1_fl, np.float64).reshape(-1, 2).mean(axis=0)
+    o2 = np.asarray(o2_fl, np.float64).reshape(-1, 2).mean(axis=0)
+    d = o2 - o1
+    return MovementPose(o1, math.atan2(d[1], d[0]), max(float(np.hypot(*d)), 1e-6))
+
+
+def _close(a: Ray, b: Ray, sigma_rad: float) -> bool:
+    """Whether two placements of one ray differ by less than :data:`MOVED_FL` and a tenth of
+    ``sigma_rad``."""
+    return (
+        math.dist(a.origin_fl, b.origin_fl) < MOVED_FL
+        and abs(a.direction_rad - b.direction_rad) < 0.1 * sigma_rad
+    )
+
+
+def _on(ray: Ray, pose: MovementPose | None) -> Ray:
+    """``ray`` from its keyframe as ``pose`` places it (unchanged when None)."""
+    if pose is None:
+        return ray
+    o = pose.o1_fl if ray.end == 0 else pose.o2_fl
+    return replace(
+        ray, origin_fl=(float(o[0]), float(o[1])), direction_rad=pose.heading_rad + ray.bearing_rad
+    )
 
 
 def _place_chained(
@@ -519,25 +611,26 @@ def _place_chained(
     return MovementPose(np.asarray(o1_fl, np.float64), heading, t), pos_std
 
 
-def _positions(h: Hypothesis) -> int:
-    """Keyframe positions of a hypothesis's rays further apart than :data:`DISTINCT_FL`."""
-    kept: list[tuple[float, float]] = []
-    for r in h.rays:
-        if all(math.dist(r.origin_fl, o) > DISTINCT_FL for o in kept):
-            kept.append(r.origin_fl)
+def _lines_of_sight(h: Hypothesis, min_rad: float) -> int:
+    """Distinct lines of sight of a hypothesis: keyframes whose lines through its point (modulo
+    pi: a keyframe behind the point lies on the same line) differ by more than
+    ``min_rad``. Keyframes on one line of sight test nothing: any point of the
+    line fits them all."""
+    d = np.array([r.origin_fl for r in h.rays]) - h.point_fl
+    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), math.pi)
+    kept: list[float] = []
+    for a in ang:
+        if all(abs(math.sin(a - k)) > math.sin(min_rad) for k in kept):
+            kept.append(float(a))
     return len(kept)
 
 
-def _rivals(o: Hypothesis, h: Hypothesis) -> bool:
-    """Whether ``o`` still disputes ``h`` (see :data:`RIVAL_LEAD`, :data:`RIVAL_RMS_RATIO`)."""
-    po, ph = _positions(o), _positions(h)
+def _rivals(o: Hypothesis, h: Hypothesis, po: int, ph: int) -> bool:
+    """Whether ``o``, seen along ``po`` lines of sight, still disputes ``h``, seen along ``ph``
+    (see :data:`RIVAL_LEAD`, :data:`RIVAL_RMS_RATIO`)."""
     if po + RIVAL_LEAD <= ph:
         return False
     return not (po <= ph and o.rms_rad >= RIVAL_RMS_RATIO * h.rms_rad)
-
-
-def _chi2(d: NDArray[np.float64], cov: NDArray[np.float64]) -> float:
-    return float(d @ np.linalg.solve(cov + 1e-12 * np.eye(2), d))
 
 
 def _contested_text(

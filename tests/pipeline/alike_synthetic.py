@@ -11,9 +11,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
-from pipeline.association import Associator, MovementAssociation
+from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.estimators import make_estimator
-from pipeline.joint.geometry import MovementPose
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import simulate_bearings
 
@@ -35,6 +34,7 @@ class SyntheticRun:
     truth_fl: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     unit_m: float = 1.0
     seconds: float = 0.0
+    association_seconds: float = 0.0
 
     def matched(self) -> dict[str, str]:
         """``blue#k`` -> true landmark: nearest, one-to-one."""
@@ -102,7 +102,9 @@ def run_synthetic(
         for s in seen:
             rng.shuffle(s)  # blobs come in no particular order
         blobs = tuple({"blue": [v for _, v in s]} for s in seen)
+        t_assoc = time.perf_counter()
         a = assoc.associate(obs.index, (unique[0], unique[1]), (blobs[0], blobs[1]), slam.estimates)
+        out.association_seconds += time.perf_counter() - t_assoc
         res = slam.process_movement(
             MovementObservation(
                 obs.index, {**unique[0], **a.bearings_o1_rad}, {**unique[1], **a.bearings_o2_rad}
@@ -110,10 +112,12 @@ def run_synthetic(
         )
         pose = None
         if res.status == "ok" and res.o1_fl is not None and res.o2_fl is not None:
-            o1, o2 = res.o1_fl.mean(axis=0), res.o2_fl.mean(axis=0)
-            d = o2 - o1
-            pose = MovementPose(o1, math.atan2(d[1], d[0]), float(np.hypot(*d)))
-        assoc.hypothesize(a, pose, slam.estimates)
+            pose = pose_between(res.o1_fl, res.o2_fl)
+        path = zip(slam.used_movements, slam.trajectory_fl, strict=True)  # type: ignore[attr-defined]
+        trajectory = {k: pose_between(*ends) for k, ends in path}
+        t_assoc = time.perf_counter()
+        assoc.hypothesize(a, pose, slam.estimates, trajectory)
+        out.association_seconds += time.perf_counter() - t_assoc
         for name, hist in a.history.items():
             slam.add_history(name, hist)  # type: ignore[attr-defined]
         out.results.append(a)

@@ -21,7 +21,7 @@ def test_named_detections_are_correct_and_nothing_is_invented(runs: list) -> Non
         matched = run.matched()
         assert len(set(matched.values())) == len(matched)  # one name per true landmark
         assert max(run.errors_m().values()) <= 0.10  # every name stands on a real landmark
-        assert len(run.given) >= 100
+        assert len(run.given) >= 80  # association is at work (names come after 3 lines of sight)
         assert run.correct_share() >= 0.98
 
 

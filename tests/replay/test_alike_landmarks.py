@@ -115,3 +115,18 @@ def test_a_log_whose_reference_shares_its_class_is_refused(tmp_path: Path) -> No
     lines = result.output.strip().splitlines()
     assert len(lines) == 1, result.output
     assert "reference landmark 'L1' shares its class 'red' with L3" in lines[0]
+
+
+def test_the_paper_estimator_with_landmarks_that_look_alike_is_refused(tmp_path: Path) -> None:
+    doc = session_doc()
+    doc["landmarks"][3]["color"] = doc["landmarks"][2]["color"]  # L4 looks like L3
+    log = write_log(tmp_path / "alike.mcap", doc=doc)
+    result = CliRunner().invoke(
+        cli, ["process", str(log), "--estimator", "paper", "--summary", str(tmp_path / "s")]
+    )
+    assert result.exit_code == 1
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1, result.output
+    assert "associated with the joint estimator only" in lines[0]
+    assert "use --estimator joint" in lines[0]
+    assert not (tmp_path / "s").exists()

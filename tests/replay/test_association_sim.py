@@ -1,23 +1,28 @@
 """Association on the real simulator: 8 identical landmarks and a distinct reference pair,
 both camera models, one fixed seed each (a run where every landmark gets named); the goals of
-issue 11 checked on it. Over 10 seeds per camera the goals are not all met (some runs name a
-landmark in the wrong place or miss one): ``tests/bench/test_bench_association.py``, figures
-in docs/RESULTS.md.
+issue 11 checked on it. Over 10 seeds per camera the goals are not all met (some runs leave a
+landmark unnamed after 20 movements): ``tests/bench/test_bench_association.py``, figures in
+docs/RESULTS.md.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
-from alike_scenarios import alike_scenario
+from alike_scenarios import alike_scenario, coded_wide_reference
 from alike_scoring import Score, score_log
 
 from replay.experiments.run import simulate
+from replay.records import MethodConfig
+from replay.sinks.summary import SummarySink
+from replay.stages import run_log
 
 
 @pytest.fixture(
     scope="module",
     # the omni run takes about 5 s: CI runs it with -m slow
-    params=[("unwrapped", 4), pytest.param(("omni", 4), marks=pytest.mark.slow)],
+    params=[("unwrapped", 2), pytest.param(("omni", 2), marks=pytest.mark.slow)],
     ids=lambda p: p[0],
 )
 def scored(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Score:
@@ -53,3 +58,40 @@ def test_the_summary_names_and_reports(scored: Score) -> None:
     first = doc["movements"][0]
     assert "explained by no named landmark" in first["ambiguous_landmarks"]["blue unexplained"]
     assert not first["landmarks"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("camera", ["unwrapped", "omni"])
+def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
+    # six layouts per camera, failures included: no name is ever given to the wrong landmark
+    # or placed off its landmark; a landmark not named within 20 movements is the one
+    # shortfall allowed (reported as unexplained blobs and open hypotheses)
+    complete = 0
+    for seed in range(1, 7):
+        log = tmp_path / f"{camera}_{seed}.mcap"
+        simulate(alike_scenario(8, camera, layout_seed=seed), log, seed=seed)
+        s = score_log(log)
+        assert s.wrong_share <= 0.02, (seed, s.wrong_share)
+        assert s.correct_share >= 0.98, (seed, s.correct_share)
+        assert len(set(s.matched.values())) == s.n_named <= 8  # none invented
+        assert max(s.errors_m.values()) <= 0.10, (seed, s.errors_m)
+        assert sum(s.errors_m.values()) / s.n_named <= 0.03, (seed, s.errors_m)
+        assert s.n_named >= 5, seed
+        complete += s.n_named == 8
+    assert complete >= 4
+
+
+@pytest.mark.slow
+def test_twenty_coded_landmarks_with_a_sensible_reference_baseline(tmp_path: Path) -> None:
+    # issue 11's arena: every landmark mapped in every run; mean <= 3 cm and worst <= 10 cm in
+    # most runs (docs/RESULTS.md: 6 of 10; the built-in coded_3x2, 46 cm baseline: 3 of 10)
+    met = 0
+    for seed in range(10):
+        log = tmp_path / f"coded_{seed}.mcap"
+        simulate(coded_wide_reference(), log, seed=seed)
+        collect = SummarySink()
+        run_log(log, MethodConfig(), [collect])
+        errors = list(collect.document["error_m"].values())
+        assert len(errors) == 18, seed
+        met += sum(errors) / 18 <= 0.03 and max(errors) <= 0.10
+    assert met >= 5
