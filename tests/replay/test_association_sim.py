@@ -65,8 +65,11 @@ def test_the_summary_names_and_reports(scored: Score) -> None:
 def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
     # six layouts per camera, failures included: no name is ever given to the wrong landmark
     # or placed off its landmark; a landmark not named within 20 movements is the one
-    # shortfall allowed (reported as unexplained blobs and open hypotheses)
-    complete = 0
+    # shortfall allowed (reported as unexplained blobs and open hypotheses), at most 5 of the
+    # 48. Measured with the default distance prior: 44 (unwrapped) and 45 (omni) named; without
+    # it 46 and 44. Whole runs with all 8 named swing between 3 and 4 of 6 with the prior, so
+    # the test counts landmarks, not runs.
+    named = 0
     for seed in range(1, 7):
         log = tmp_path / f"{camera}_{seed}.mcap"
         simulate(alike_scenario(8, camera, layout_seed=seed), log, seed=seed)
@@ -77,8 +80,8 @@ def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
         assert max(s.errors_m.values()) <= 0.10, (seed, s.errors_m)
         assert sum(s.errors_m.values()) / s.n_named <= 0.03, (seed, s.errors_m)
         assert s.n_named >= 5, seed
-        complete += s.n_named == 8
-    assert complete >= 4
+        named += s.n_named
+    assert named >= 43, named
 
 
 @pytest.mark.slow
