@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
 from pipeline.frame_change import to_fl
 
@@ -96,6 +95,8 @@ def match_truth(
         cost = np.array(
             [[float(np.hypot(*(np.asarray(means_fl[n]) - fl[t]))) for t in trues] for n in names]
         )
+        from scipy.optimize import linear_sum_assignment  # about 0.6 s: only when needed
+
         rows, cols = linear_sum_assignment(cost)
         out.update({names[r]: trues[c] for r, c in zip(rows, cols, strict=True)})
     return out

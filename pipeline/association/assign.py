@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
 from data_schemas.angles import wrap_rad
 
@@ -54,6 +53,9 @@ class Assignment:
 
 def _solve(d2: NDArray[np.float64], gate: float) -> tuple[float, list[tuple[int, int]]]:
     """Best assignment with "alone" options at cost ``gate``; its cost and its pairs."""
+    # imported here: scipy.optimize costs about 0.6 s, and only look-alike landmarks need it
+    from scipy.optimize import linear_sum_assignment
+
     n, m = d2.shape
     big = np.full((n + m, m + n), _BIG)
     big[:n, :m] = np.where(d2 <= gate, d2, _BIG)

@@ -2,10 +2,13 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 from click.testing import CliRunner
 
 from replay.cli import cli
+
+REGRESS = Path(__file__).parents[1] / "data" / "regress"
 
 
 def test_help_lists_group() -> None:
@@ -45,3 +48,21 @@ def test_paper_estimator_does_not_import_gtsam() -> None:
         "assert 'gtsam' in sys.modules\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+
+
+def test_processing_a_log_without_look_alikes_does_not_import_scipy(tmp_path: Path) -> None:
+    # scipy.optimize (~0.6 s to import) is paid only when landmarks look alike (association)
+    # or a simulated truth must be matched to ambiguous names
+    log = REGRESS / "unwrapped.mcap"
+    code = (
+        "import sys\n"
+        "from replay.cli import cli\n"
+        "try:\n"
+        f"    cli(['process', {str(log)!r}, '--summary', {str(tmp_path / 's.json')!r}])\n"
+        "except SystemExit as e:\n"
+        "    assert e.code in (0, None), e.code\n"
+        "assert 'scipy.optimize' not in sys.modules\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "s.json").is_file()
