@@ -1,10 +1,10 @@
 """Shared test settings: a deterministic Hypothesis profile (same examples on every run), and how
-the run is spread over the machine's cores (pytest-xdist, ``-n auto --dist loadgroup`` in
-pyproject.toml).
+the run is spread over the machine's cores (pytest-xdist, ``-n auto --dist loadscope`` in
+pyproject.toml, with the work units chosen here).
 
-Each test module runs in one worker, so a module's fixtures are built once. Modules that time
-real processes or send real signals (``pytestmark = pytest.mark.xdist_group("processes")``)
-share one worker: two of them never run at once. ``-s``, ``--pdb``, benchmarks and runs of
+Each test module is one work unit, run whole by one worker, so a module's fixtures are built
+once. The modules that time real processes or send real signals (``PROCESS_MODULES``) make one
+unit together: two of them never run at once. ``-s``, ``--pdb``, benchmarks and runs of
 named test files use no workers (``-n 0`` does the same for any run, ``-n 2`` forces two).
 """
 
@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
+from xdist.remote import Producer
+from xdist.scheduler import LoadScopeScheduling
 
 settings.register_profile(
     "deterministic",
@@ -44,8 +46,30 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
     return None
 
 
-@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    for item in items:
-        if item.get_closest_marker("xdist_group") is None:
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+#: Modules that start real processes or send real signals: run one after another in one worker.
+PROCESS_MODULES = frozenset(
+    {
+        "tests/recorder/test_fake_khepera.py",
+        "tests/replay/test_cli_record_signals.py",
+        "tests/replay/test_live.py",
+        "tests/replay/test_signals.py",
+    }
+)
+
+
+class ModuleScheduling(LoadScopeScheduling):
+    """xdist's scope scheduling with a test module as the scope (``PROCESS_MODULES`` as one).
+
+    (xdist's own ``loadgroup`` marks are not honoured under pytest 9.2: it renames ``_nodeid``,
+    which pytest no longer reads, so the groups were silently ignored.)
+    """
+
+    def _split_scope(self, nodeid: str) -> str:
+        module = nodeid.split("::", 1)[0]
+        return "processes" if module in PROCESS_MODULES else module
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Producer) -> LoadScopeScheduling | None:
+    if config.getvalue("dist") != "loadscope":
+        return None  # another --dist was asked for: xdist's own
+    return ModuleScheduling(config, log)

@@ -18,8 +18,6 @@ from recorder.robot import KheperaRobot, RobotConfig
 from recorder.robot.protocol import encode_reply, encode_request
 from recorder.sim.fake_khepera import ActuationNoise, FakeKhepera, PtyServer
 
-pytestmark = pytest.mark.xdist_group("processes")  # real processes and signals, one at a time
-
 ROOT = Path(__file__).resolve().parents[2]
 Z = encode_reply("z", "Protocol error")
 

@@ -26,8 +26,6 @@ from data_schemas.registry import TOPICS
 from recorder.clock import SystemClock
 from recorder.sim.fake_khepera import FakeKhepera
 
-pytestmark = pytest.mark.xdist_group("processes")  # real processes and signals, one at a time
-
 ROOT = Path(__file__).resolve().parents[2]
 H, W = 48, 96
 

@@ -23,8 +23,6 @@ from replay.process import process_log
 from replay.records import MethodConfig, MovementRecord
 from replay.sinks.summary import SummarySink
 
-pytestmark = pytest.mark.xdist_group("processes")  # real processes and signals, one at a time
-
 METHOD = MethodConfig(n_l=150, seed=3)
 BSLAM = [sys.executable, "-m", "replay.cli"]
 

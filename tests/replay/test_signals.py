@@ -15,8 +15,6 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.xdist_group("processes")  # real processes and signals, one at a time
-
 ROOT = Path(__file__).resolve().parents[2]
 REGRESS = ROOT / "tests" / "data" / "regress"
 #: Not a speed goal (stopping takes about 0.2 s): a stop that hangs fails well before pytest's.
