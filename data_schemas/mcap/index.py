@@ -54,6 +54,9 @@ from data_schemas.mcap.layout import (
 #: Threads that check chunks (CRC, decompression, walk) for a pass, beside the caller's: one
 #: (measured on 2 cores: a second one competes with the caller and costs more than it saves).
 _LOAD_THREADS = 1
+#: One message's fields: channel id, sequence, log time (ns), publish time (ns), data (what a
+#: pass yields; no mcap ``Message`` object per message).
+MessageFields = tuple[int, int, int, int, bytes]
 #: Chunks checked ahead of the one the caller reads from.
 _AHEAD = 2
 #: Where one message lies: log time, file offset of its chunk, offset in the chunk's records,
@@ -206,7 +209,29 @@ class LogIndex:
         end_ns: int | None = None,
         publish_times_ns: Container[int] | None = None,
     ) -> Iterator[Message]:
-        """Messages of ``channel_ids`` with ``start_ns <= log_time < end_ns``, in log-time order.
+        """Messages of ``channel_ids`` with ``start_ns <= log_time < end_ns``, in log-time order
+        (:meth:`fields` as mcap's ``Message`` records)."""
+        for channel, sequence, log_time, publish_time, data in self.fields(
+            channel_ids, start_ns=start_ns, end_ns=end_ns, publish_times_ns=publish_times_ns
+        ):
+            yield Message(
+                channel_id=channel,
+                sequence=sequence,
+                log_time=log_time,
+                publish_time=publish_time,
+                data=data,
+            )
+
+    def fields(
+        self,
+        channel_ids: Collection[int],
+        *,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+        publish_times_ns: Container[int] | None = None,
+    ) -> Iterator[MessageFields]:
+        """The fields of the messages of ``channel_ids`` with ``start_ns <= log_time < end_ns``,
+        in log-time order: (channel id, sequence, log time, publish time, data).
 
         ``publish_times_ns``, if given, keeps only messages whose publish time is in it (in a
         stored chunk, the others' data is not read for them).
@@ -342,7 +367,7 @@ class _Loaded:
         offset: int,
         indexed: tuple[int, int],
         publish_times_ns: Container[int] | None,
-    ) -> Message | None:
+    ) -> MessageFields | None:
         """The message at ``offset``, which its index says is ``indexed`` (channel id, log
         time), copied from the checked records (``data``: the mapped file, for a stored
         chunk); None if its publish time is not wanted."""
@@ -364,13 +389,7 @@ class _Loaded:
             if stop > len(data):
                 raise DamagedLogError(f"the message at byte {at} is cut short")
             payload = bytes(data[at + MESSAGE_HEADER.size : stop])
-        return Message(
-            channel_id=channel,
-            sequence=sequence,
-            log_time=log_time,
-            publish_time=publish_time,
-            data=payload,
-        )
+        return channel, sequence, log_time, publish_time, payload
 
 
 def _decompressed(record: memoryview, compression: str) -> bytes:

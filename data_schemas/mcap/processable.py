@@ -25,6 +25,7 @@ from typing import IO
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 
 from data_schemas.closing import Closing
@@ -36,7 +37,7 @@ from data_schemas.errors import (
     UnknownSchemaError,
     recover_hint,
 )
-from data_schemas.mcap.index import CorruptChunksError, DamagedLogError, LogIndex
+from data_schemas.mcap.index import CorruptChunksError, DamagedLogError, LogIndex, MessageFields
 from data_schemas.mcap.read import LogMessage, corrupt_log_line, corruption
 from data_schemas.mcap.scan import Damage, LogScan
 from data_schemas.registry import IMAGE_SCHEMAS, SESSION_METADATA_NAME, TOPICS, schema_dict
@@ -157,7 +158,7 @@ class ProcessableLog(Closing):
         if self._index is not None:
             assert summary is not None
             schemas, channels = summary.schemas, summary.channels
-            metadata = self._indexed_metadata()
+            metadata = self._indexed_metadata(summary)
         else:
             schemas, channels, metadata = self._scanned(skip_corrupt)
         check_calibration(self.name, metadata)
@@ -193,11 +194,16 @@ class ProcessableLog(Closing):
             return None
         return index
 
-    def _indexed_metadata(self) -> dict[str, dict[str, str]]:
+    def _indexed_metadata(self, summary: Summary) -> dict[str, dict[str, str]]:
+        """The metadata records the summary's metadata indexes point to (the summary is not
+        read again)."""
         found: dict[str, dict[str, str]] = {}
         try:
-            self._file.seek(0)
-            for record in make_reader(self._file).iter_metadata():
+            for metadata_index in summary.metadata_indexes:
+                self._file.seek(metadata_index.offset)
+                record = next(StreamReader(self._file, skip_magic=True).records, None)
+                if not isinstance(record, Metadata):
+                    raise McapError(f"no metadata record at byte {metadata_index.offset}")
                 found.setdefault(record.name, dict(record.metadata))
         except (McapError, ValueError, KeyError, UnicodeDecodeError, EOFError) as exc:
             raise LogError(f"{self.name}: cannot read the log's metadata ({exc})") from None
@@ -261,15 +267,12 @@ class ProcessableLog(Closing):
         names = self._channel_names
         ids = [i for i, (t, _) in names.items() if topics is None or t in topics]
         try:
-            for message in self._found(ids, start_ns, end_ns, publish_times_ns):
-                topic_name, schema_name = names[message.channel_id]
+            for channel, sequence, log_time_ns, publish_time_ns, data in self._found(
+                ids, start_ns, end_ns, publish_times_ns
+            ):
+                topic_name, schema_name = names[channel]
                 yield LogMessage(
-                    topic_name,
-                    schema_name,
-                    message.log_time,
-                    message.publish_time,
-                    message.sequence,
-                    message.data,
+                    topic_name, schema_name, log_time_ns, publish_time_ns, sequence, data
                 )
         except CorruptChunksError as exc:
             assert self._index is not None
@@ -297,10 +300,11 @@ class ProcessableLog(Closing):
         start_ns: int | None,
         end_ns: int | None,
         publish_times_ns: Container[int] | None,
-    ) -> Iterator[Message]:
-        """Messages through the log's index if it has one, else by a scan sorted by log time."""
+    ) -> Iterator[MessageFields]:
+        """The fields of the messages, through the log's index if it has one, else by a scan
+        sorted by log time."""
         if self._index is not None:
-            yield from self._index.messages(
+            yield from self._index.fields(
                 ids, start_ns=start_ns, end_ns=end_ns, publish_times_ns=publish_times_ns
             )
             return
@@ -317,8 +321,8 @@ class ProcessableLog(Closing):
                 ):
                     found.append((record.log_time, len(found), record))
         found.sort(key=lambda item: item[:2])
-        for _, _, message in found:
-            yield message
+        for _, _, m in found:
+            yield m.channel_id, m.sequence, m.log_time, m.publish_time, m.data
 
     @property
     def _advice(self) -> str:

@@ -161,9 +161,9 @@ def test_damaged_chunk_is_refused_before_any_of_its_messages(compression: Compre
     loaded = clean_index._load(target.chunk_start_offset)
     assert loaded.problem == ""
     inside = {
-        loaded.message(  # type: ignore[union-attr]
+        loaded.message(  # type: ignore[index]
             clean_index._data(), target.chunk_start_offset, offset, (channel, t), None
-        ).sequence
+        )[1]  # its sequence
         for offset, channel, t in clean_index._entries[target.chunk_start_offset]
     }
     assert inside and not {m.sequence for m in got} & inside
