@@ -174,19 +174,32 @@ class Kde:
         return result
 
 
+def _mixture_sample(q: Kde, p: Kde, m: int, rng: np.random.Generator) -> NDArray[np.float64]:
+    """``m`` draws (m, 2) from the defensive mixture of two KDEs: ``m - m // 2`` from ``q``,
+    then ``m // 2`` from ``p``."""
+    return np.vstack((q.sample(m - m // 2, rng), p.sample(m // 2, rng)))
+
+
+def _mixture_logpdf(
+    q: Kde, p: Kde, x: NDArray[np.float64], m: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``log q(x)``, ``log p(x)`` and the log density of the mixture of ``m`` draws (k,) at
+    points (k, 2) (any subset of the draws: each point's values depend on that point alone)."""
+    m_q = m - m // 2
+    lq = q.logpdf(x)
+    lp = p.logpdf(x)
+    log_mix = np.logaddexp(lq + math.log(m_q / m), lp + math.log(max(m // 2, 1) / m))
+    return lq, lp, log_mix
+
+
 def _mixture_draws(
     q: Kde, p: Kde, m: int, rng: np.random.Generator
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """``m`` draws from the defensive mixture of two KDEs (``m - m // 2`` from ``q``, the rest
     from ``p``): points (m, 2), ``log q(x)``, ``log p(x)`` and the mixture's log density (m,).
     """
-    m_q = m - m // 2
-    m_p = m // 2
-    x = np.vstack((q.sample(m_q, rng), p.sample(m_p, rng)))
-    lq = q.logpdf(x)
-    lp = p.logpdf(x)
-    log_mix = np.logaddexp(lq + math.log(m_q / m), lp + math.log(max(m_p, 1) / m))
-    return x, lq, lp, log_mix
+    x = _mixture_sample(q, p, m, rng)
+    return (x, *_mixture_logpdf(q, p, x, m))
 
 
 def fuse(
@@ -240,6 +253,23 @@ class LikelihoodUpdate(NamedTuple):
     points_fl: NDArray[np.float64]
     weights: NDArray[np.float64]
     defensive: bool
+
+
+#: Rows of a density evaluation come in multiples of this (see :func:`_padded`).
+_ROW_GROUP = 64
+
+
+def _padded(index: NDArray[np.intp]) -> NDArray[np.intp]:
+    """``index`` (k,) followed by copies of its last entry up to a multiple of ``_ROW_GROUP``.
+
+    BLAS and numpy's SIMD loops treat a partial group of rows at the end of an array with other
+    kernels (a different rounding, 1 ulp); rows in whole groups get the same bits wherever they
+    are, so a density evaluated at a padded subset of the draws equals, bit for bit, the same
+    rows of the evaluation at all of them (whose count, ``16 n_l``, is a multiple of 64 at the
+    usual ``n_l``).
+    """
+    pad = -index.size % _ROW_GROUP
+    return np.concatenate((index, np.full(pad, index[-1]))) if pad else index
 
 
 def _ess(w: NDArray[np.float64]) -> float:
@@ -305,16 +335,22 @@ def fuse_likelihood(
     if prev_weights is not None or prev_fl.shape[0] != n_l:
         kept = np.ones(prev_fl.shape[0]) if prev_weights is None else prev_weights
         kernels = prev_fl[systematic_resample(kept, n_l, rng)]
-    xd, lq, _, log_mix = _mixture_draws(Kde.fit(kernels, h), Kde.fit(new_fl, h), m, rng)
+    q_hat, p_hat = Kde.fit(kernels, h), Kde.fit(new_fl, h)
+    xd = _mixture_sample(q_hat, p_hat, m, rng)
     lik = likelihood(xd)
     if not float(lik.sum()) > 0.0:
         return plain
-    with np.errstate(divide="ignore"):
-        log_w = np.log(lik)
+    # the two densities only where L_t > 0 (elsewhere the weight is 0 whatever they are): the
+    # costly part, m x n_l kernel terms each, shrinks to the draws the likelihood keeps
+    hit = np.flatnonzero(lik)
+    lq, _, log_mix = _mixture_logpdf(q_hat, p_hat, xd[_padded(hit)], m)
+    lq, log_mix = lq[: hit.size], log_mix[: hit.size]
+    log_w = np.log(lik[hit])
     log_w += lq
     log_w -= log_mix
     log_w -= log_w.max()
-    wd = np.exp(log_w, out=log_w)
+    wd = np.zeros(m)
+    wd[hit] = np.exp(log_w)
     if plain is None:
         return LikelihoodUpdate(xd, wd, defensive=True)
     # both sets, each scaled to total its effective sample size: inverse-variance weights of

@@ -7,7 +7,10 @@ compare medians. Peak memory of the chunked exact change of frame is in ``extra_
 from __future__ import annotations
 
 import math
+import statistics
+import time
 import tracemalloc
+from collections.abc import Callable
 from functools import partial
 from typing import Any
 
@@ -16,13 +19,15 @@ import pytest
 
 from pipeline import BearingSlam, ConeIntersection, intersect_cones
 from pipeline.frame_change import change_frame_exact, change_frame_sampled, to_fl
-from pipeline.fusion import fuse, fuse_likelihood
+from pipeline.fusion import PROPOSALS_PER_PARTICLE, fuse, fuse_likelihood
 from pipeline.init_fr import sample_fr_posterior
-from pipeline.likelihood import FrameLikelihood
+from pipeline.likelihood import N_FRAMES, FrameLikelihood
 from pipeline.priors import ImpartialPrior
 from pipeline.synthetic import PAPER_REFERENCE, simulate_bearings
 
 EPS = math.radians(3.0)
+#: Alternated rounds of the growth benchmark.
+ROUNDS = 41
 
 
 def _sets(n_r: int) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
@@ -158,3 +163,61 @@ def test_whole_run_10_movements(benchmark: Any) -> None:
             slam.process_movement(obs)
 
     benchmark(go)
+
+
+def _alternate(step: Callable[[], object], yardstick: Callable[[], object]) -> tuple[float, float]:
+    """Medians (s) of ``step`` and ``yardstick``, timed one after the other ``ROUNDS`` times."""
+    a, b = [], []
+    for _ in range(ROUNDS):
+        t0 = time.perf_counter()
+        step()
+        t1 = time.perf_counter()
+        yardstick()
+        t2 = time.perf_counter()
+        a.append(t1 - t0)
+        b.append(t2 - t1)
+    return statistics.median(a), statistics.median(b)
+
+
+@pytest.mark.parametrize("defensive", [False, True], ids=["plain", "defensive"])
+@pytest.mark.benchmark(group="fusion_growth")
+def test_fusion_step_grows_like_n_l(benchmark: Any, defensive: bool) -> None:
+    """The step at n_l = 75-1200 against ``np.exp`` of its (proposal, frame) pair count,
+    alternated: a flat ratio (and cost per particle) as n_l doubles is linear growth. Plain: a
+    belief covering the likelihood; defensive: a wide belief around a narrow likelihood (the
+    mixture's draws and its two KDE densities of n_l kernels each, where L_t > 0)."""
+    pool1, pool2, (b1, b2), belief = _likelihood_case()
+    frame = FrameLikelihood(pool1, pool2, ImpartialPrior(EPS))
+    centre = belief.mean(axis=0)
+    rng = np.random.default_rng(4)
+    lik = partial(frame, bearing_o1_rad=b1, bearing_o2_rad=b2, rng=rng)
+    rows = []
+    for n_l in (75, 150, 300, 600, 1200):
+        m = PROPOSALS_PER_PARTICLE * n_l
+        if defensive:
+            prev = rng.normal(centre + 0.5, 0.5, (n_l, 2))
+            new_fl: np.ndarray | None = rng.normal(centre, 0.1, (n_l, 2))
+        else:
+            prev = rng.multivariate_normal(centre, np.diag([0.01, 0.004]), m)
+            new_fl = None
+        res = fuse_likelihood(prev, lik, n_l, rng, new_fl=new_fl)
+        assert res is not None and res.defensive == defensive
+        values = np.random.default_rng(0).random(m * N_FRAMES)
+        step_s, yard_s = _alternate(
+            partial(fuse_likelihood, prev, lik, n_l, rng, new_fl=new_fl),
+            partial(np.exp, values),
+        )
+        rows.append((n_l, step_s, yard_s))
+        benchmark.extra_info[f"n_l={n_l}"] = {
+            "step_ms": step_s * 1e3,
+            "yardstick_ms": yard_s * 1e3,
+            "ratio": step_s / yard_s,
+            "us_per_particle": step_s * 1e6 / n_l,
+        }
+    print(f"\n{'defensive' if defensive else 'plain'} step (medians of {ROUNDS}, alternated):")
+    for n_l, step_s, yard_s in rows:
+        print(
+            f"  n_l {n_l:5d}: {step_s * 1e3:7.3f} ms, {step_s * 1e6 / n_l:6.2f} us/particle, "
+            f"{step_s / yard_s:5.1f}x np.exp of {PROPOSALS_PER_PARTICLE * N_FRAMES * n_l}"
+        )
+    benchmark.pedantic(lambda: None, rounds=1)  # the figures above are the result

@@ -126,3 +126,28 @@ def test_mixture_density_is_the_density_of_its_draws() -> None:
     for ratio in (np.exp(lq - log_mix), np.exp(lp - log_mix)):
         assert abs(ratio.mean() - 1.0) < 4 * ratio.std() / math.sqrt(ratio.size)
         assert ratio.std() / math.sqrt(ratio.size) < 0.005
+
+
+def test_defensive_weights_equal_those_of_every_draw_bit_for_bit() -> None:
+    # the two densities are evaluated only where L_t > 0; the weights must be the bits of the
+    # evaluation at all 2 m draws (log L + log q^ - log mix), so results do not change
+    rng = np.random.default_rng(11)
+    prev = rng.normal(0.0, 1.0, (N_L, 2))
+    new_fl = rng.normal([2.5, 0.0], 0.1, (N_L, 2))
+    lik = _likelihood(np.array([2.5, 0.0]))
+    for seed in range(4):
+        got = fuse_likelihood(prev, lik, N_L, np.random.default_rng(seed), new_fl=new_fl)
+        assert got is not None and got.defensive
+        ref_rng = np.random.default_rng(seed)
+        m = 16 * N_L
+        Kde.fit(prev).sample(m, ref_rng)  # the plain draws come first
+        xd, lq, _, log_mix = _mixture_draws(Kde.fit(prev), Kde.fit(new_fl), m, ref_rng)
+        with np.errstate(divide="ignore"):
+            log_w = np.log(lik(xd)) + lq - log_mix
+        wd = np.exp(log_w - log_w.max())
+        assert 0 < np.count_nonzero(wd) < m  # a subset: the case the shortcut is for
+        plain = got.points_fl.shape[0] - m  # 0 when no plain draw had L_t > 0
+        if plain:
+            wd *= float(wd.sum()) / float(wd @ wd)
+        assert np.array_equal(got.points_fl[plain:], xd)
+        assert np.array_equal(got.weights[plain:], wd)
