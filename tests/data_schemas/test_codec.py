@@ -64,3 +64,31 @@ def test_stamp_split() -> None:
 def test_session_schema_inlines_calibration() -> None:
     cal = schema_dict("bslam.Session")["properties"]["camera"]["properties"]["calibration"]
     assert "oneOf" in cal
+
+
+def _particles(x: list[object]) -> dict[str, object]:
+    point_set = {"name": "L3", "x": x, "y": [0.5] * len(x)}
+    return {
+        "timestamp": stamp_from_ns(1),
+        "index": 0,
+        "landmarks": [point_set],
+        "observation_points": [],
+    }
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        (True, r"field 'landmarks.0.x.2': True is not of type 'number'"),
+        ("0.3", r"field 'landmarks.0.x.2': '0.3' is not of type 'number'"),
+        ([0.3], r"field 'landmarks.0.x.2': \[0.3\] is not of type 'number'"),
+        (None, r"field 'landmarks.0.x.2': None is not of type 'number'"),
+        (float("nan"), r"field 'landmarks.0.x.2': must be a finite number, got nan"),
+        (float("-inf"), r"field 'landmarks.0.x.2': must be a finite number, got -inf"),
+    ],
+)
+def test_arrays_of_numbers_are_checked_item_by_item(value: object, message: str) -> None:
+    # plain numeric arrays take a one-pass check; every other item still fails by name
+    encode("/pipeline/particles_fl", _particles([0.1, 2, 0.3, -4.0]))
+    with pytest.raises(SchemaError, match="^/pipeline/particles_fl: " + message):
+        encode("/pipeline/particles_fl", _particles([0.1, 2, value, -4.0]))
