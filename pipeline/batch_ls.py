@@ -19,7 +19,6 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import EstimationError
@@ -90,5 +89,7 @@ def batch_least_squares(
     for _, o1, o2 in moves:
         d = o2 - o1
         x0.append(np.array([o1[0], o1[1], math.atan2(d[1], d[0]), math.log(math.hypot(*d))]))
+    from scipy.optimize import least_squares  # ~0.5 s to import: only when a fit is made
+
     sol = least_squares(residuals, np.concatenate(x0) if x0 else np.zeros(0), method="trf")
     return {n: sol.x[2 * i : 2 * i + 2].copy() for i, n in enumerate(free)}

@@ -14,11 +14,9 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from replay.experiments.results import CRB, Results
+from replay.experiments.results import CRB, METHOD_LABELS, PAPER_ERROR_CM, Results
 from replay.experiments.stats import Band, movement_curve, n_l_curve
 
-#: the paper's Fig. 7 reading: about 2 cm after 3 movements
-PAPER_ERROR_CM = 2.0
 METHOD_COLORS = {
     "impartial": "tab:blue",
     "gaussian": "tab:orange",
@@ -26,14 +24,6 @@ METHOD_COLORS = {
     "joint": "tab:purple",
     "batch_ls": "tab:red",
     CRB: "black",
-}
-METHOD_LABELS = {
-    "impartial": "impartial PDF",
-    "gaussian": "single Gaussian",
-    "mixture": "Gaussian mixture",
-    "joint": "joint estimator (GTSAM)",
-    "batch_ls": "batch least squares",
-    CRB: "Cramér–Rao bound",
 }
 
 

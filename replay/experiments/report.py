@@ -12,8 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from replay.experiments.plots import METHOD_LABELS, PAPER_ERROR_CM
-from replay.experiments.results import CRB, Results
+from replay.experiments.results import CRB, METHOD_LABELS, PAPER_ERROR_CM, Results
 from replay.experiments.stats import (
     Band,
     PairedDifference,

@@ -25,6 +25,18 @@ ESTIMATORS = (*PRIORS, "joint", "batch_ls")
 #: the Cramér–Rao bound rows: error_fl = sqrt(trace(CRB)), a Gaussian-equivalent line
 CRB = "crb"
 
+#: the paper's Fig. 7 reading: about 2 cm after 3 movements
+PAPER_ERROR_CM = 2.0
+#: How reports and figures name each method.
+METHOD_LABELS = {
+    "impartial": "impartial PDF",
+    "gaussian": "single Gaussian",
+    "mixture": "Gaussian mixture",
+    "joint": "joint estimator (GTSAM)",
+    "batch_ls": "batch least squares",
+    CRB: "Cramér–Rao bound",
+}
+
 
 class ResultsError(BslamError):
     """A results file is missing or malformed."""

@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import linear_sum_assignment
 
 from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.estimators import make_estimator
@@ -48,6 +47,8 @@ class SyntheticRun:
                 for n in names
             ]
         )
+        from scipy.optimize import linear_sum_assignment  # ~0.5 s: not at collection
+
         rows, cols = linear_sum_assignment(cost)
         return {names[r]: trues[c] for r, c in zip(rows, cols, strict=True)}
 
