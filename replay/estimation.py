@@ -44,5 +44,6 @@ def joint_fields(result: MovementResult) -> dict[str, Any]:
         "residuals_rad": dict(result.residuals_rad),
         "bearing_noise_rad": None if result.noise is None else result.noise.sigma_rad,
         "divergence": result.divergence,
+        "map_unit_m": result.unit_m,
         "also_placed": tuple(result.also_placed),
     }

@@ -179,6 +179,9 @@ class MovementRecord:
         Joint estimator: bearing noise std estimated from every residual of the map.
     divergence : str
         Joint estimator: why the map was re-initialized from the particles, if it was.
+    map_unit_m : float or None
+        Joint estimator with the distance prior: the map's unit |L1 L2| in metres, estimated
+        from the driven distances.
     ambiguous_landmarks : dict key -> reason
         What association left unresolved in this movement (a detection of a shared class that
         no landmark or several explain, a movement that could not be placed): never guessed.
@@ -212,6 +215,7 @@ class MovementRecord:
     residuals_rad: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     bearing_noise_rad: float | None = None
     divergence: str = ""
+    map_unit_m: float | None = None
     ambiguous_landmarks: Mapping[str, str] = field(default_factory=dict)
     also_placed: tuple[int, ...] = ()
     not_visible: Mapping[str, str] = field(default_factory=dict)

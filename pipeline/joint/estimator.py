@@ -778,6 +778,11 @@ class JointSlam:
     # ------------------------------------------------------------------ one movement
     def process_movement(self, obs: MovementObservation) -> JointMovementResult:
         """Initialize with the paper's filter, place the movement, add its bearings, update."""
+        res = self._process_movement(obs)
+        res.unit_m = self.unit_m
+        return res
+
+    def _process_movement(self, obs: MovementObservation) -> JointMovementResult:
         p = self.paper.process_movement(obs)
         res = JointMovementResult(
             obs.index,

@@ -63,6 +63,7 @@ class SummarySink:
         self._landmarks: dict[str, Any] = {}
         self._errors_m: dict[str, float] = {}
         self._noise_rad: float | None = None
+        self._unit_m: float | None = None
         self._reinitializations = 0
         self._matched: dict[str, str] = {}
 
@@ -113,6 +114,9 @@ class SummarySink:
         if record.bearing_noise_rad is not None:
             self._noise_rad = record.bearing_noise_rad
             entry["bearing_noise_deg"] = round(math.degrees(record.bearing_noise_rad), 6)
+        if record.map_unit_m is not None:
+            self._unit_m = record.map_unit_m
+            entry["map_unit_m"] = _num(record.map_unit_m)
         if record.also_placed:
             entry["also_placed"] = list(record.also_placed)
         if record.divergence:
@@ -149,6 +153,8 @@ class SummarySink:
         self.document["landmarks"] = self._landmarks
         if self._run is not None:
             self._association_summary(self._run)
+        if self._unit_m is not None:
+            self.document["map_unit_m"] = _num(self._unit_m)
         if self._noise_rad is not None:
             self.document["bearing_noise_deg"] = round(math.degrees(self._noise_rad), 6)
             self.document["reinitializations"] = self._reinitializations
