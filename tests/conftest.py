@@ -10,6 +10,7 @@ named test files use no workers (``-n 0`` does the same for any run, ``-n 2`` fo
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,12 @@ settings.register_profile(
     print_blob=True,
 )
 settings.load_profile("deterministic")
+
+# A shell without job control starts background jobs with Ctrl-C ignored, and Python then never
+# installs its KeyboardInterrupt handler; children inherit the ignore. The tests that send
+# SIGINT to the CLI, the recorder and the fake robot need it delivered as a user's Ctrl-C is.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 BENCH = Path(__file__).parent / "bench"
 
