@@ -158,7 +158,7 @@ def _protocol(kw: dict[str, Any], runs: int, **extra: Any) -> Any:
         frame_change=kw["frame_change"],
         seed=kw["seed"],
         n_l_movements=min(3, kw["movements"]),
-        distance_prior=kw["distance_prior"] or None,
+        distance_prior=kw["distance_prior"],
         **extra,
     )
 

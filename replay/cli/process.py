@@ -37,10 +37,15 @@ estimator_option = click.option(
     "paper: the paper's filter alone.",
 )
 
+def _zero_is_off(ctx: click.Context, param: click.Parameter, value: float) -> float | None:
+    return value or None
+
+
 distance_prior_option = click.option(
     "--distance-prior",
     "distance_prior",
     type=FiniteFloat(min=0.0),
+    callback=_zero_is_off,
     default=DEFAULT_DISTANCE_PRIOR,
     show_default=True,
     metavar="FRACTION",
@@ -164,7 +169,7 @@ def process(
     summary: Path | None,
     estimator: str,
     turn_prior_deg: float | None,
-    distance_prior: float,
+    distance_prior: float | None,
     prior: str,
     n_r: int,
     n_l: int,
@@ -200,7 +205,7 @@ def process(
         seed=seed,
         estimator=estimator,
         turn_prior_deg=turn_prior_deg,
-        distance_prior=distance_prior or None,
+        distance_prior=distance_prior,
     )
     if follow:
         _process_followed(logs, out, summary, method, idle_timeout, scheduler, force)

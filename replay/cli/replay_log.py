@@ -42,7 +42,7 @@ def replay(
     skip_corrupt: bool,
     estimator: str,
     turn_prior_deg: float | None,
-    distance_prior: float,
+    distance_prior: float | None,
     prior: str,
     n_r: int,
     n_l: int,
@@ -80,7 +80,7 @@ def replay(
         seed=seed,
         estimator=estimator,
         turn_prior_deg=turn_prior_deg,
-        distance_prior=distance_prior or None,
+        distance_prior=distance_prior,
     )
     url = None
     with show_skips():
