@@ -10,7 +10,9 @@ named test files use no workers (``-n 0`` does the same for any run, ``-n 2`` fo
 
 from __future__ import annotations
 
+import os
 import signal
+import sys
 from pathlib import Path
 
 import pytest
@@ -35,6 +37,24 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 BENCH = Path(__file__).parent / "bench"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Compile each module once per run, not once per worker and per CLI subprocess.
+
+    Where ``PYTHONDONTWRITEBYTECODE`` is set (as on the CI machines), every test worker and every
+    ``bslam`` subprocess compiled the project's modules again: about 2 s per worker and a few
+    tenths per subprocess. The controller (before its workers start) lets Python write bytecode
+    under ``.pytest_cache/pycache`` instead (``PYTHONPYCACHEPREFIX``): the source tree stays
+    free of ``__pycache__``, and the workers and subprocesses inherit the setting.
+    """
+    if hasattr(config, "workerinput") or not sys.dont_write_bytecode or config.cache is None:
+        return
+    prefix = config.cache.mkdir("pycache")
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+    os.environ["PYTHONPYCACHEPREFIX"] = str(prefix)
+    sys.dont_write_bytecode = False
+    sys.pycache_prefix = str(prefix)
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
