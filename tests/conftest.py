@@ -40,21 +40,19 @@ BENCH = Path(__file__).parent / "bench"
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Compile each module once per run, not once per worker and per CLI subprocess.
+    """Compile each module of the project once per run, not once per worker and per subprocess.
 
     Where ``PYTHONDONTWRITEBYTECODE`` is set (as on the CI machines), every test worker and every
     ``bslam`` subprocess compiled the project's modules again: about 2 s per worker and a few
-    tenths per subprocess. The controller (before its workers start) lets Python write bytecode
-    under ``.pytest_cache/pycache`` instead (``PYTHONPYCACHEPREFIX``): the source tree stays
-    free of ``__pycache__``, and the workers and subprocesses inherit the setting.
+    tenths per subprocess. The controller, before its workers start, lets Python write bytecode
+    as it does by default (``__pycache__`` beside the sources, ignored by git); the workers and
+    subprocesses inherit that. (A ``PYTHONPYCACHEPREFIX`` outside the tree would also move the
+    installed libraries' bytecode there, and a fresh run would compile them all: slower.)
     """
-    if hasattr(config, "workerinput") or not sys.dont_write_bytecode or config.cache is None:
+    if hasattr(config, "workerinput") or not sys.dont_write_bytecode:
         return
-    prefix = config.cache.mkdir("pycache")
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
-    os.environ["PYTHONPYCACHEPREFIX"] = str(prefix)
     sys.dont_write_bytecode = False
-    sys.pycache_prefix = str(prefix)
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int | None:
