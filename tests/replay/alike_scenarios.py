@@ -61,14 +61,18 @@ def alike_scenario(
     }
 
 
-def coded_wide_reference() -> dict[str, Any]:
+def coded_wide_reference(moves: int = 10) -> dict[str, Any]:
     """The built-in ``coded_3x2`` (20 coded landmarks, 3 x 2 m, unwrapped 960 x 160) with L2 and
-    L5 swapped: the same layout and codes, the reference pair 1.18 m apart (46 cm built in)."""
+    L5 swapped: the same layout and codes, the reference pair 1.18 m apart (46 cm built in); the
+    trajectory ``moves`` movements long (10 built in)."""
     from recorder.sim.scenario import builtin_scenario
 
     doc = builtin_scenario("coded_3x2").to_dict()
     swap = {"L2": "L5", "L5": "L2"}
     for lm in doc["landmarks"]:
         lm["name"] = swap.get(lm["name"], lm["name"])
-    doc["description"] = "coded_3x2 with L2 and L5 swapped: a 1.18 m reference baseline"
+    doc["trajectory"]["moves"] = moves
+    doc["description"] = (
+        f"coded_3x2 with L2 and L5 swapped (a 1.18 m reference baseline), {moves} movements"
+    )
     return doc
