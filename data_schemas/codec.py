@@ -9,45 +9,29 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator
 from functools import cache
 from typing import TYPE_CHECKING, Any
 
 from data_schemas.errors import SchemaError
+from data_schemas.quick_check import conforms
 from data_schemas.registry import schema_dict, topic
 
 if TYPE_CHECKING:
     import jsonschema
 
 
-#: The item schema of an array of plain numbers.
-_NUMBER = {"type": "number"}
+@cache
+def _schema(schema_name: str) -> dict[str, Any]:
+    return schema_dict(schema_name)
 
 
 @cache
 def _validator(schema_name: str) -> jsonschema.protocols.Validator:
-    import jsonschema  # ~50 ms: only when something is validated, not for `bslam --help`
+    import jsonschema  # ~70 ms: only when a document may be invalid (data_schemas/quick_check.py)
 
-    schema = schema_dict(schema_name)
+    schema = _schema(schema_name)
     cls = jsonschema.validators.validator_for(schema, default=jsonschema.Draft202012Validator)
-    items = cls.VALIDATORS["items"]
-
-    def numbers_at_once(
-        validator: Any, items_schema: Any, instance: Any, parent: dict[str, Any]
-    ) -> Iterator[Any]:
-        # an array of plain numbers (particle coordinates: thousands per message) is checked in
-        # one pass; anything else, or any doubt, goes through the keyword's own rule
-        if (
-            items_schema == _NUMBER
-            and "prefixItems" not in parent
-            and isinstance(instance, list)
-            and all(type(v) is float or type(v) is int for v in instance)
-        ):
-            return
-        yield from items(validator, items_schema, instance, parent)
-
-    fast = jsonschema.validators.extend(cls, {"items": numbers_at_once})  # type: ignore[no-untyped-call]
-    validator: jsonschema.protocols.Validator = fast(schema)
+    validator: jsonschema.protocols.Validator = cls(schema)
     return validator
 
 
@@ -73,12 +57,13 @@ def validate(schema_name: str, doc: Any, *, what: str | None = None) -> None:
     SchemaError
         One line naming ``what`` and the offending field.
     """
-    from jsonschema.exceptions import best_match
+    if conforms(_schema(schema_name), doc) is not True:
+        from jsonschema.exceptions import best_match
 
-    error = best_match(_validator(schema_name).iter_errors(doc))
-    if error is not None:
-        field, message = _explain(error)
-        raise SchemaError(f"{what or schema_name}: field {field!r}: {message}")
+        error = best_match(_validator(schema_name).iter_errors(doc))
+        if error is not None:
+            field, message = _explain(error)
+            raise SchemaError(f"{what or schema_name}: field {field!r}: {message}")
     require_finite(doc, what or schema_name)
 
 

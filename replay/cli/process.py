@@ -37,6 +37,7 @@ estimator_option = click.option(
     "paper: the paper's filter alone.",
 )
 
+
 def _zero_is_off(ctx: click.Context, param: click.Parameter, value: float) -> float | None:
     return value or None
 
