@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import gtsam
 import numpy as np
@@ -782,8 +782,23 @@ class JointSlam:
         res.unit_m = self.unit_m
         return res
 
+    def _initializing(self, obs: MovementObservation) -> MovementObservation:
+        """The movement as the initializer (the paper's filter) sees it: the reference pair and
+        the landmarks not yet in the graph; a landmark in the graph has its bearings there."""
+        mapped = self._in_graph - set(self.reference)
+
+        def keep(bearings_rad: Mapping[str, float]) -> dict[str, float]:
+            return {k: b for k, b in bearings_rad.items() if k not in mapped}
+
+        return replace(
+            obs,
+            bearings_o1_rad=keep(obs.bearings_o1_rad),
+            bearings_o2_rad=keep(obs.bearings_o2_rad),
+        )
+
     def _process_movement(self, obs: MovementObservation) -> JointMovementResult:
-        p = self.paper.process_movement(obs)
+        mapped = self._in_graph - set(self.reference)
+        p = self.paper.process_movement(self._initializing(obs))
         res = JointMovementResult(
             obs.index,
             "ok",
@@ -792,7 +807,7 @@ class JointSlam:
             cones_fr=p.cones_fr,
             particles_fr=p.particles_fr,
             particles_fl=p.particles_fl,
-            belief_fl=p.belief_fl,
+            belief_fl={k: v for k, v in p.belief_fl.items() if k not in mapped},
         )
         # the paper's per-landmark skips concern its two-view cones; the joint map uses every
         # single bearing, so only names outside the catalog are reported

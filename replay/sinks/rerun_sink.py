@@ -10,8 +10,10 @@ Entities (the blueprint in :mod:`replay.blueprint` lays them out):
 ``bearings/<name>``             bearing in degrees over time
 ``fr/cones/<name>``             per movement, the two vision cones (FR: O1 = (0, 0), O2 = (1, 0))
 ``fr/particles/<name>``         per movement, the particles drawn in the cones' intersection
+                                (joint estimator: until the landmark is in the map)
 ``fr/observation``              O1 and O2
-``map/particles/<name>``        the belief in FL after each movement
+``map/particles/<name>``        the belief in FL after each movement (joint: its initializer's,
+                                until the landmark is in the map)
 ``map/estimates``               means (labelled); ``map/ellipses/<name>``: 80% credible regions
 ``map/reference``               L1 = (0, 0) and L2 = (1, 0)
 ``map/trajectory``              observation points O1 -> O2 of every movement so far, in FL
@@ -351,6 +353,10 @@ class RerunSink:
                 f"map/particles/{name}",
                 rr.Points2D(particles, colors=[self._rgb[name]], radii=rr.Radius.ui_points(1.5)),
             )
+        if run.method.estimator == "joint":
+            # its initializer's belief stops with the landmark's entry in the map
+            for name in record.estimates.keys() - record.particles_fl.keys():
+                log(f"map/particles/{name}", rr.Clear(recursive=False))
         names = [n for n in record.estimates if n not in run.session.reference]
         if names:
             log(
