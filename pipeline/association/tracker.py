@@ -530,7 +530,8 @@ class Associator:
 
     def _ray_fits(self, r: Ray, e: LandmarkEstimate) -> bool:
         """Whether ray ``r`` is within the gate of the bearing of ``e`` predicted from its
-        keyframe (one ray of :meth:`_same`, in scalars)."""
+        keyframe (first order, as :func:`~pipeline.association.predict.predict_bearings`, in
+        scalars: a few rays and landmarks at a time)."""
         dx, dy = float(e.mean_fl[0]) - r.origin_fl[0], float(e.mean_fl[1]) - r.origin_fl[1]
         r2 = max(dx * dx + dy * dy, 1e-12)
         jx, jy = -dy / r2, dx / r2
@@ -542,20 +543,9 @@ class Associator:
     def _same(self, h: Hypothesis, *named: LandmarkEstimate) -> bool:
         """Whether every ray of ``h`` is a bearing of one of ``named`` (within the gate of its
         predicted bearing from the ray's keyframe): then ``h`` is that landmark seen again."""
-        k, m = len(h.rays), len(named)
-        if m == 0 or not any(self._ray_fits(h.rays[-1], e) for e in named):
-            return False  # the last ray alone rules them out (cheap, no arrays)
-        bearings = np.array([r.bearing_rad for r in h.rays])
-        heads = np.array([r.direction_rad for r in h.rays]) - bearings
-        pred, std = predict_bearings(  # rays x named, flattened ray-major
-            np.repeat(np.array([r.origin_fl for r in h.rays]), m, axis=0),
-            np.repeat(heads, m),
-            np.tile(np.array([e.mean_fl for e in named]), (k, 1)),
-            np.tile(np.array([e.cov_fl for e in named]), (k, 1, 1)),
-            bearing_var_rad=2.0 * self.sigma_rad**2,
-        )
-        d2 = ((wrap_rad(np.repeat(bearings, m) - pred) / std) ** 2).reshape(k, m)
-        return bool(np.any(np.all(d2 <= GATE_CHI2, axis=0)))
+        if not any(self._ray_fits(h.rays[-1], e) for e in named):
+            return False  # the last ray alone rules most of them out
+        return any(all(self._ray_fits(r, e) for r in h.rays) for e in named)
 
 
 def pose_between(o1_fl: NDArray[np.float64], o2_fl: NDArray[np.float64]) -> MovementPose:
