@@ -57,6 +57,31 @@ FIT_TOL_EPS = 1.0
 MIN_PARALLAX_EPS = 2.0
 
 
+def cannot_meet(r1: Ray, r2: Ray, eps_rad: float) -> bool:
+    """True when :func:`fit` is sure to refuse the pair ``(r1, r2)``: their lines cross behind
+    one of them, or ahead of both with less than :data:`MIN_PARALLAX_EPS` of parallax.
+
+    Scalars, about a microsecond: most pairings of one class's detections at O1 and O2 are
+    refused, and this spares them the fit. Near the limits (nearly parallel rays, a crossing at
+    an origin, a parallax within 1e-6 rad of the bound) it says False and leaves them to fit.
+    """
+    c1, s1 = math.cos(r1.direction_rad), math.sin(r1.direction_rad)
+    c2, s2 = math.cos(r2.direction_rad), math.sin(r2.direction_rad)
+    cross = c1 * s2 - s1 * c2
+    if abs(cross) < 1e-3:
+        return False
+    dx = r2.origin_fl[0] - r1.origin_fl[0]
+    dy = r2.origin_fl[1] - r1.origin_fl[1]
+    t1 = (dx * s2 - dy * c2) / cross  # the crossing is origin + t * direction on each ray
+    t2 = (dx * s1 - dy * c1) / cross
+    if min(abs(t1), abs(t2)) < 1e-3:
+        return False
+    if t1 < 0.0 or t2 < 0.0:
+        return True  # behind a ray: its bearing is off by pi
+    parallax = abs(math.remainder(r1.direction_rad - r2.direction_rad, math.tau))
+    return parallax < MIN_PARALLAX_EPS * eps_rad - 1e-6
+
+
 def fit(
     label: str,
     rays: list[Ray],

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.assign import GATE_CHI2, Assignment, assign
-from pipeline.association.hypotheses import Hypothesis, Ray, fit
+from pipeline.association.hypotheses import Hypothesis, Ray, cannot_meet, fit
 from pipeline.association.predict import predict_bearings
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
@@ -459,6 +459,8 @@ class Associator:
             r1 = self._ray(index, 0, i, float(dets[0][i]), origins[0], heading)
             for j in free[1]:
                 r2 = self._ray(index, 1, j, float(dets[1][j]), origins[1], heading)
+                if cannot_meet(r1, r2, self.eps_rad):
+                    continue
                 h = fit(label, [r1, r2], self.eps_rad, self.sigma_rad)
                 if h is not None:
                     self.hypotheses[label].append(h)
