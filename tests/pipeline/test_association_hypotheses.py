@@ -19,7 +19,7 @@ def _ray(end: int, x: float, y: float, direction: float) -> Ray:
     return Ray(0, end, 0, direction, (x, y), direction)
 
 
-@settings(max_examples=3000)
+@settings(max_examples=1000)
 @given(COORD, COORD, ANGLE, COORD, COORD, ANGLE, st.floats(0.0, 0.3))
 def test_what_it_refuses_the_fit_refuses(
     x1: float, y1: float, d1: float, x2: float, y2: float, d2: float, near: float
