@@ -42,7 +42,7 @@ BENCH = Path(__file__).parent / "bench"
 def pytest_configure(config: pytest.Config) -> None:
     """Compile each module of the project once per run, not once per worker and per subprocess.
 
-    Where ``PYTHONDONTWRITEBYTECODE`` is set (as on the CI machines), every test worker and every
+    Where ``PYTHONDONTWRITEBYTECODE`` is set in the environment, every test worker and every
     ``bslam`` subprocess compiled the project's modules again: about 2 s per worker and a few
     tenths per subprocess. The controller, before its workers start, lets Python write bytecode
     as it does by default (``__pycache__`` beside the sources, ignored by git); the workers and

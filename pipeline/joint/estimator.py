@@ -782,10 +782,10 @@ class JointSlam:
         res.unit_m = self.unit_m
         return res
 
-    def _initializing(self, obs: MovementObservation) -> MovementObservation:
-        """The movement as the initializer (the paper's filter) sees it: the reference pair and
-        the landmarks not yet in the graph; a landmark in the graph has its bearings there."""
-        mapped = self._in_graph - set(self.reference)
+    @staticmethod
+    def _initializing(obs: MovementObservation, mapped: set[str]) -> MovementObservation:
+        """The movement as the initializer (the paper's filter) sees it: without the ``mapped``
+        landmarks (in the graph beside the reference pair), whose bearings refine them there."""
 
         def keep(bearings_rad: Mapping[str, float]) -> dict[str, float]:
             return {k: b for k, b in bearings_rad.items() if k not in mapped}
@@ -798,7 +798,7 @@ class JointSlam:
 
     def _process_movement(self, obs: MovementObservation) -> JointMovementResult:
         mapped = self._in_graph - set(self.reference)
-        p = self.paper.process_movement(self._initializing(obs))
+        p = self.paper.process_movement(self._initializing(obs, mapped))
         res = JointMovementResult(
             obs.index,
             "ok",
