@@ -124,4 +124,6 @@ def result_line(doc: dict[str, Any]) -> str:
         text += f"; alike landmarks named: {named}"
         if assoc["movements_with_unresolved"]:
             text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
+        if assoc.get("doubtful"):
+            text += f"; doubtful: {', '.join(assoc['doubtful'])} (seen too rarely where predicted)"
     return text

@@ -191,6 +191,9 @@ class MovementRecord:
         detected there (hidden behind another, out of range).
     named_landmarks : list of str
         Landmarks of shared classes named with this movement (confirmed hypotheses).
+    doubtful_landmarks : dict name -> reason or None
+        Named landmarks of shared classes whose predictions since their naming were too rarely
+        seen (:mod:`pipeline.association.support`); None where association did not run.
     also_placed : tuple of int
         Joint estimator: earlier movements that had to wait and entered the map with this one.
     """
@@ -220,6 +223,7 @@ class MovementRecord:
     also_placed: tuple[int, ...] = ()
     not_visible: Mapping[str, str] = field(default_factory=dict)
     named_landmarks: Sequence[str] = ()
+    doubtful_landmarks: Mapping[str, str] | None = None
 
     @property
     def ok(self) -> bool:

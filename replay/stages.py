@@ -338,7 +338,10 @@ class Runner:
             record = replace(record, ambiguous_landmarks=ambiguous)
             if assoc is not None:
                 record = replace(
-                    record, not_visible=dict(assoc.not_visible), named_landmarks=assoc.confirmed
+                    record,
+                    not_visible=dict(assoc.not_visible),
+                    named_landmarks=assoc.confirmed,
+                    doubtful_landmarks=dict(assoc.doubtful),
                 )
         if not record.ok:
             logger.warning("%s: movement %d %s", self.log.name, index, record.status)

@@ -21,8 +21,13 @@ For each movement (its two keyframes, O1 and O2):
    hypothesis that misses :data:`MAX_MISSES` keyframes, or is not confirmed within
    :data:`MAX_AGE` movements, is dropped.
 
+5. What became of each named landmark's predictions since it was named (seen, missed,
+   contested, too uncertain) is counted (:mod:`pipeline.association.support`); a name seen too
+   rarely is reported as doubtful every movement while it stays so.
+
 Whatever is left unresolved (contested detections, unexplained detections, a class beyond its
-catalog count, a movement that cannot be placed) is reported in the movement's result.
+catalog count, a movement that cannot be placed, a doubtful name) is reported in the movement's
+result.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from data_schemas.angles import wrap_rad
 from pipeline.association.assign import GATE_CHI2, Assignment, assign
 from pipeline.association.hypotheses import Hypothesis, Ray, cannot_meet, fit
 from pipeline.association.predict import predict_bearings
+from pipeline.association.support import Outcome, Support
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.joint.geometry import MovementPose, Sightings, resect
@@ -96,6 +102,13 @@ class MovementAssociation:
         Ambiguities not resolved (key: a landmark name or a class label, with the keyframe).
     not_visible : dict name -> str
         Named landmarks predicted but not detected (hidden behind another, out of range).
+    outcomes : dict name -> list of str
+        Per named landmark predicted at this movement's keyframes, what became of each
+        prediction (:data:`~pipeline.association.support.Outcome`).
+    doubtful : dict name -> str
+        Named landmarks whose predictions since their naming were too rarely seen
+        (:meth:`~pipeline.association.support.Support.doubt`), with why; also in
+        ``unresolved`` (key ``"<name> doubtful"``).
     n_hypotheses : int
         Live hypotheses after this movement.
     pose : MovementPose or None
@@ -110,6 +123,8 @@ class MovementAssociation:
     history: dict[str, list[tuple[int, int, float]]] = field(default_factory=dict)
     unresolved: dict[str, str] = field(default_factory=dict)
     not_visible: dict[str, str] = field(default_factory=dict)
+    outcomes: dict[str, list[Outcome]] = field(default_factory=dict)
+    doubtful: dict[str, str] = field(default_factory=dict)
     n_hypotheses: int = 0
     pose: MovementPose | None = None
 
@@ -142,6 +157,8 @@ class Associator:
         self.hypotheses: dict[str, list[Hypothesis]] = {c: [] for c in self.capacity}
         #: named landmarks the estimator has not mapped yet: their rays, refitted as they grow
         self.unmapped: dict[str, Hypothesis] = {}
+        #: what became of each named landmark's predictions since it was named
+        self.support: dict[str, Support] = {}
         self._last: tuple[int, MovementPose] | None = None
         self._dets: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         self._free: dict[str, tuple[list[int], list[int]]] = {}
@@ -230,6 +247,7 @@ class Associator:
                     out.unresolved[c] = (
                         f"{d1.size + d2.size} detection(s) not associated: movement {placed}"
                     )
+            self._weigh(out)
             out.n_hypotheses = sum(len(h) for h in self.hypotheses.values())
             return out
         for _ in range(2):  # placed from the unique landmarks, then with the named ones too
@@ -249,8 +267,22 @@ class Associator:
             if isinstance(again, str):
                 break
             placed = again
+        self._weigh(out)
         out.n_hypotheses = sum(len(h) for h in self.hypotheses.values())
         return out
+
+    def _weigh(self, out: MovementAssociation) -> None:
+        """Count the outcomes of this movement's predictions; report doubtful names."""
+        for name, outcomes in out.outcomes.items():
+            support = self.support.get(name)
+            if support is not None and support.named_at < out.index:
+                for outcome in outcomes:
+                    support.add(outcome)
+        for name, support in self.support.items():
+            why = support.doubt()
+            if why is not None:
+                out.doubtful[name] = why
+                out.unresolved[f"{name} doubtful"] = why
 
     def _assign_named(
         self, index: int, pose: MovementPose, pos_std: float, mapped: Mapping[str, LandmarkEstimate]
@@ -373,6 +405,7 @@ class Associator:
                 out.unresolved[f"{known[k][0]}@{where}"] = (
                     f"predicted bearing too uncertain to associate (std {_deg(float(std[k]))})"
                 )
+                out.outcomes.setdefault(known[k][0], []).append("vague")
             sharp = np.flatnonzero(~vague)
             pred, std = pred[sharp], std[sharp]
             usable = [known[i] for i in sharp]
@@ -381,10 +414,14 @@ class Associator:
             for i, j in a.pairs:
                 bmap[usable[i][0]] = float(det[j])
                 out.names[label][end][j] = usable[i][0]
+                out.outcomes.setdefault(usable[i][0], []).append("seen")
             for i in a.missing:
                 out.not_visible[f"{usable[i][0]}@{where}"] = (
                     f"predicted at {_deg(float(pred[i]))}, not detected (hidden or out of range)"
                 )
+                out.outcomes.setdefault(usable[i][0], []).append("missed")
+            for i in a.contested_landmarks:
+                out.outcomes.setdefault(usable[i][0], []).append("contested")
             if a.contested_landmarks or a.contested_detections:
                 out.unresolved[f"{label}@{where}"] = _contested_text(a, usable, det)
             # contested detections may still be a landmark not named yet: hypotheses may take them
@@ -504,6 +541,7 @@ class Associator:
             name = slot_name(label, len(self.named[label]) + 1)
             self.named[label].append(name)
             self.unmapped[name] = h
+            self.support[name] = Support(out.index)
             out.confirmed.append(name)
             out.history[name] = [(r.movement, r.end, r.bearing_rad) for r in h.rays]
             for r in h.rays:

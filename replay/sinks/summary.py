@@ -14,8 +14,10 @@ their landmarks are named by association (``red#1``, ... in order of confirmatio
 movement k left unresolved (contested or unexplained detections, a movement not placed),
 ``not_visible`` the named landmarks predicted but not detected, ``named_landmarks`` those named
 with it; ``association`` sums up the names per class, the catalog counts, the movements with
-something unresolved and, for simulated logs, ``matched_truth`` (each ``red#k`` matched to the
-nearest true landmark of its class, one-to-one; ``error_m`` is measured against it).
+something unresolved, the names still ``doubtful`` after the last movement (name -> why:
+seen too rarely where predicted since named) and, for simulated logs, ``matched_truth``
+(each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
+measured against it).
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ class SummarySink:
         self._unit_m: float | None = None
         self._reinitializations = 0
         self._matched: dict[str, str] = {}
+        self._doubtful: dict[str, str] = {}
 
     def start(self, run: RunInfo) -> None:
         self._run = run
@@ -128,6 +131,8 @@ class SummarySink:
             entry["not_visible"] = dict(record.not_visible)
         if record.named_landmarks:
             entry["named_landmarks"] = list(record.named_landmarks)
+        if record.doubtful_landmarks is not None:
+            self._doubtful = dict(record.doubtful_landmarks)
         if record.ok:
             self._landmarks = {
                 name: _estimate(e) for name, e in record.estimates.items() if name not in reference
@@ -181,5 +186,7 @@ class SummarySink:
             "catalog_count": {label: len(v) for label, v in shared.items()},
             "movements_with_unresolved": unresolved,
         }
+        if self._doubtful:
+            self.document["association"]["doubtful"] = dict(sorted(self._doubtful.items()))
         if self._matched:
             self.document["association"]["matched_truth"] = dict(sorted(self._matched.items()))

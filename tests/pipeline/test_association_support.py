@@ -1,0 +1,78 @@
+"""When a named landmark of a shared class becomes doubtful: seen too rarely where predicted
+since it was named (:mod:`pipeline.association.support`), on counts and on synthetic runs."""
+
+from __future__ import annotations
+
+import pytest
+from alike_synthetic import run_synthetic
+
+from pipeline.association.support import (
+    DOUBT_MIN_PREDICTIONS,
+    DOUBT_NEVER_SEEN,
+    DOUBT_SEEN_SHARE,
+    Outcome,
+    Support,
+)
+
+
+def _support(*outcomes: Outcome) -> Support:
+    s = Support(named_at=3)
+    for o in outcomes:
+        s.add(o)
+    return s
+
+
+def test_a_name_mostly_seen_is_not_doubtful() -> None:
+    # one miss in three: a real landmark hidden now and then
+    assert _support(*(["seen", "seen", "missed"] * 10)).doubt() is None
+    # a young name is left alone until it has been predicted a few times
+    assert _support("seen", "contested", "contested").doubt() is None
+    assert _support().doubt() is None
+
+
+def test_a_name_seen_too_rarely_is_doubtful_and_says_why() -> None:
+    n = DOUBT_MIN_PREDICTIONS
+    seen = int(DOUBT_SEEN_SHARE * n)
+    if seen >= DOUBT_SEEN_SHARE * n:
+        seen -= 1
+    why = _support(*(["seen"] * seen + ["contested"] * (n - seen))).doubt()
+    assert why is not None
+    assert f"seen at {seen} of {n} keyframes" in why
+    assert "movement 3" in why and f"{n - seen} contested" in why
+    # one more sighting and it is not doubtful any more
+    enough = _support(*(["seen"] * (seen + 1) + ["contested"] * (n - seen - 1)))
+    assert enough.seen >= DOUBT_SEEN_SHARE * n and enough.doubt() is None
+
+
+def test_a_name_never_seen_again_is_doubtful_early() -> None:
+    outcomes: list[Outcome] = ["missed", "vague"][:DOUBT_NEVER_SEEN]
+    assert _support(*outcomes[:-1]).doubt() is None
+    why = _support(*outcomes).doubt()
+    assert why is not None and "seen at 0 of" in why
+
+
+@pytest.mark.slow  # two 20-movement runs, about 2 s
+def test_a_landmark_hidden_after_its_naming_is_reported_doubtful() -> None:
+    # seed 4 names B7 with movement 1 and every landmark by movement 16, none ever doubtful
+    plain = run_synthetic(8, 4)
+    assert len(plain.matched()) == 8 and not any(r.doubtful for r in plain.results)
+    name = next(r.confirmed[0] for r in plain.results if r.confirmed)
+    assert plain.matched()[name] == "B7"
+
+    # hidden from movement 2 on, B7 is predicted and never seen again: doubtful from its
+    # second prediction on, to the last movement, and the others are not (seed 4 named every
+    # landmark; ``name`` keeps its number here)
+    def hide(move: int, end: int, landmark: str) -> bool:
+        return landmark == "B7" and move >= 2
+
+    run = run_synthetic(8, 4, hide=hide)
+    assert run.matched()[name] == "B7"
+    doubtful = [r.index for r in run.results if name in r.doubtful]
+    assert doubtful == list(range(doubtful[0], 20)) and doubtful[0] <= 3
+    last = run.results[-1]
+    support = run.associator.support[name]
+    # a few blobs of other landmarks that line up with its prediction are taken for it
+    assert support.seen <= 0.15 * support.predicted and support.missed >= 0.8 * support.predicted
+    assert f"seen at {support.seen} of {support.predicted} keyframes" in last.doubtful[name]
+    assert last.unresolved[f"{name} doubtful"] == last.doubtful[name]
+    assert set(last.doubtful) == {name}
