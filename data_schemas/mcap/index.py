@@ -37,7 +37,7 @@ from typing import IO
 from isal import isal_zlib
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import ChunkIndex, Message
+from mcap.records import ChunkIndex
 from mcap.summary import Summary
 
 from data_schemas.mcap.compression import COMPRESSIONS, DecompressionError, decompress
@@ -200,27 +200,6 @@ class LogIndex:
                 view.release()
             if mapping is not None:
                 mapping.close()
-
-    def messages(
-        self,
-        channel_ids: Collection[int],
-        *,
-        start_ns: int | None = None,
-        end_ns: int | None = None,
-        publish_times_ns: Container[int] | None = None,
-    ) -> Iterator[Message]:
-        """Messages of ``channel_ids`` with ``start_ns <= log_time < end_ns``, in log-time order
-        (:meth:`fields` as mcap's ``Message`` records)."""
-        for channel, sequence, log_time, publish_time, data in self.fields(
-            channel_ids, start_ns=start_ns, end_ns=end_ns, publish_times_ns=publish_times_ns
-        ):
-            yield Message(
-                channel_id=channel,
-                sequence=sequence,
-                log_time=log_time,
-                publish_time=publish_time,
-                data=data,
-            )
 
     def fields(
         self,

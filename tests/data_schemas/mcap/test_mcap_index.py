@@ -40,7 +40,13 @@ def _recorded(seed: int = 3) -> bytes:
 
 
 def _tuples(messages: Any) -> list[tuple[int, int, int, int, bytes]]:
+    """mcap ``Message`` records as the index's field tuples."""
     return [(m.channel_id, m.sequence, m.log_time, m.publish_time, m.data) for m in messages]
+
+
+def _fields(fields: Any) -> list[tuple[int, int, int, int, bytes]]:
+    """The index's field tuples, data as bytes."""
+    return [(c, seq, t, pt, bytes(data)) for c, seq, t, pt, data in fields]
 
 
 def _index(data: bytes) -> tuple[LogIndex, Any]:
@@ -74,7 +80,7 @@ def test_same_messages_and_order_as_mcap(
             topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=True
         )
     )
-    got = _tuples(index.messages(ids, start_ns=start_ns, end_ns=end_ns))
+    got = _fields(index.fields(ids, start_ns=start_ns, end_ns=end_ns))
     assert got == expected
     assert len(got) > 0 or bounds == (None, 0)
     if start_ns is not None:
@@ -83,9 +89,9 @@ def test_same_messages_and_order_as_mcap(
 
 def test_publish_time_filter_keeps_only_those() -> None:
     index, reader = _index(_recorded())
-    everything = _tuples(index.messages(list(reader.get_summary().channels)))
+    everything = _fields(index.fields(list(reader.get_summary().channels)))
     chosen = {everything[i][3] for i in (0, 7, 40)}
-    got = _tuples(index.messages(list(reader.get_summary().channels), publish_times_ns=chosen))
+    got = _fields(index.fields(list(reader.get_summary().channels), publish_times_ns=chosen))
     assert got == [m for m in everything if m[3] in chosen]
 
 
@@ -129,10 +135,10 @@ def test_compressed_log_gives_what_mcap_gives(compression: CompressionType) -> N
     for topics in (["/a", "/b", "/c"], ["/b"]):
         chosen = [i for i in ids if reader.get_summary().channels[i].topic in topics]
         expected = _tuples(m for _, _, m in reader.iter_messages(topics, log_time_order=True))
-        assert _tuples(index.messages(chosen)) == expected
-    everything = _tuples(index.messages(ids))
+        assert _fields(index.fields(chosen)) == expected
+    everything = _fields(index.fields(ids))
     chosen_times = {everything[i][3] for i in (1, 30, 99)}
-    assert _tuples(index.messages(ids, publish_times_ns=chosen_times)) == [
+    assert _fields(index.fields(ids, publish_times_ns=chosen_times)) == [
         m for m in everything if m[3] in chosen_times
     ]
 
@@ -155,7 +161,7 @@ def test_damaged_chunk_is_refused_before_any_of_its_messages(compression: Compre
     channels = list(summary.channels)
     got: list[Any] = []
     with pytest.raises(CorruptChunksError, match=rf"chunk at byte {target.chunk_start_offset}: "):
-        got.extend(index.messages(channels))
+        got.extend(index.fields(channels))
     assert got  # the chunks before it were read
     clean_index, _ = _index(clean)
     loaded = clean_index._load(target.chunk_start_offset)
@@ -166,7 +172,7 @@ def test_damaged_chunk_is_refused_before_any_of_its_messages(compression: Compre
         )[1]  # its sequence
         for offset, channel, t in clean_index._entries[target.chunk_start_offset]
     }
-    assert inside and not {m.sequence for m in got} & inside
+    assert inside and not {sequence for _, sequence, *_ in got} & inside
     assert [c for c, _ in index.verify()] == [target]
 
 
@@ -180,7 +186,7 @@ def test_index_disagreeing_with_an_intact_chunk_is_damage() -> None:
     data[entry : entry + 8] = (12_345).to_bytes(8, "little")  # its log time
     index, _ = _index(bytes(data))
     with pytest.raises(CorruptChunksError, match="message index disagrees with its records"):
-        list(index.messages(list(summary.channels)))
+        list(index.fields(list(summary.channels)))
 
 
 def test_uncompressed_mcap_writer_log_is_read_in_place() -> None:
@@ -193,7 +199,7 @@ def test_uncompressed_mcap_writer_log_is_read_in_place() -> None:
         writer.add_message(channel, t, b'{"t": %d}' % t, t + 1)
     writer.finish()
     index, reader = _index(out.getvalue())
-    assert _tuples(index.messages([channel])) == _tuples(m for _, _, m in reader.iter_messages())
+    assert _fields(index.fields([channel])) == _tuples(m for _, _, m in reader.iter_messages())
 
 
 def _one_chunk() -> bytes:
@@ -223,10 +229,10 @@ def test_index_not_matching_the_message_is_damage(field: int, value: bytes, matc
     index, _ = _index(bytes(data))
     # the chunk check sees it first (before any message), then the read itself would
     with pytest.raises(CorruptChunksError, match=r"chunk at byte \d+: CRC mismatch"):
-        list(index.messages([1]))
+        list(index.fields([1]))
     index._checked.update(index._chunks)  # as if the chunk had passed
     with pytest.raises(DamagedLogError, match=match):
-        list(index.messages([1]))
+        list(index.fields([1]))
 
 
 def test_index_past_the_end_of_the_file_is_damage() -> None:
@@ -236,7 +242,7 @@ def test_index_past_the_end_of_the_file_is_damage() -> None:
     assert index is not None
     stream.truncate(data.index(b'{"n": 1}') - 10)
     with pytest.raises(CorruptChunksError, match="cut short"):
-        list(index.messages([1]))
+        list(index.fields([1]))
 
 
 def test_indexes_missing_a_channel_are_left_to_mcap() -> None:
@@ -260,7 +266,7 @@ def test_an_error_inside_a_pass_is_not_hidden_by_close(tmp_path: Path) -> None:
         held = index._data()[100:200]  # what a checking thread holds while it works
         with pytest.raises(KeyError, match="the caller's own error"):
             try:
-                for _ in index.messages(index.channel_ids):
+                for _ in index.fields(index.channel_ids):
                     raise KeyError("the caller's own error")
             finally:
                 index.close()
