@@ -358,6 +358,7 @@ class RerunSink:
             for name in record.estimates.keys() - record.particles_fl.keys():
                 log(f"map/particles/{name}", rr.Clear(recursive=False))
         names = [n for n in record.estimates if n not in run.session.reference]
+        doubtful = record.doubtful_landmarks or {}
         if names:
             log(
                 "map/estimates",
@@ -365,9 +366,11 @@ class RerunSink:
                     np.array([record.estimates[n].mean_fl for n in names]),
                     colors=[self._rgb[n] for n in names],
                     radii=rr.Radius.ui_points(5.0),
-                    labels=names,
+                    labels=[f"{n} (doubtful)" if n in doubtful else n for n in names],
                 ),
             )
+        for name, why in doubtful.items():
+            log("log", rr.TextLog(f"movement {record.index}: {name} doubtful: {why}", level="WARN"))
         for n in names:
             log(
                 f"map/ellipses/{n}",

@@ -12,7 +12,10 @@ from pathlib import Path
 import pytest
 from alike_scenarios import alike_scenario
 from alike_scoring import Score, score_log
+from click.testing import CliRunner
+from test_rerun import _read
 
+from replay.cli import cli
 from replay.experiments.run import simulate
 
 
@@ -102,3 +105,12 @@ def test_names_off_their_landmark_are_reported_doubtful(
     assert set(doubtful) == off
     assert all("keyframes where predicted since it was named" in why for why in doubtful.values())
     assert f"doubtful: {', '.join(sorted(off))}" in result_line(s.summary)
+    # and in Rerun: the map labels them, the log says why (read back with Rerun's reader)
+    rrd = tmp_path / "run.rrd"
+    result = CliRunner().invoke(cli, ["replay", str(log), "--save", str(rrd)])
+    assert result.exit_code == 0, result.output
+    rows = _read(rrd)
+    last = [r["Points2D:labels"] for r in rows["/map/estimates"] if r.get("Points2D:labels")][-1]
+    assert {n.removesuffix(" (doubtful)") for n in last if n.endswith(" (doubtful)")} == off
+    texts = [t for r in rows["/log"] for t in r.get("TextLog:text") or ()]
+    assert all(any(f"{n} doubtful: seen at" in t for t in texts) for n in off)
