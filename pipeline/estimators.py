@@ -34,6 +34,9 @@ class Estimator(Protocol):
     def estimates(self) -> dict[str, LandmarkEstimate]:
         """The current map: non-reference landmarks, FL."""
 
+    def forget(self, name: str) -> None:
+        """Drop landmark ``name`` and what it was given so far (its name was found wrong)."""
+
 
 #: Default relative std of the joint estimator's prior on each movement's length from its driven
 #: distance (docs/method.md, the joint estimator: measured on the paper protocol).

@@ -333,6 +333,12 @@ class BearingSlam:
         else:
             self._belief[name] = particles_fl[systematic_resample(weights, self.n_l, self.rng)]
 
+    def forget(self, name: str) -> None:
+        """Drop the belief of landmark ``name`` (its name was found wrong); it starts afresh
+        from its next bearings."""
+        self._belief.pop(name, None)
+        self._weighted.pop(name, None)
+
     @property
     def belief_fl(self) -> dict[str, NDArray[np.float64]]:
         """Current belief per non-reference landmark: (n_l, 2) FL."""

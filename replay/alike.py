@@ -83,6 +83,8 @@ class AlikeLandmarks:
             else None
         )
         self.associator.hypothesize(assoc, pose, estimator.estimates, trajectory)
+        for name in assoc.retracted:
+            estimator.forget(name)
         add_history = getattr(estimator, "add_history", None)
         for name, bearings in assoc.history.items():
             if add_history is not None:

@@ -23,7 +23,8 @@ For each movement (its two keyframes, O1 and O2):
 
 5. What became of each named landmark's predictions since it was named (seen, missed,
    contested, too uncertain) is counted (:mod:`pipeline.association.support`); a name seen too
-   rarely is reported as doubtful every movement while it stays so.
+   rarely is reported as doubtful every movement while it stays so. When the class's catalog
+   is full and a hypothesis is confirmed, the most doubtful name is retracted and given to it.
 
 Whatever is left unresolved (contested detections, unexplained detections, a class beyond its
 catalog count, a movement that cannot be placed, a doubtful name) is reported in the movement's
@@ -109,6 +110,10 @@ class MovementAssociation:
         Named landmarks whose predictions since their naming were too rarely seen
         (:meth:`~pipeline.association.support.Support.doubt`), with why; also in
         ``unresolved`` (key ``"<name> doubtful"``).
+    retracted : dict name -> str
+        Doubtful names taken back with this movement and given to a landmark a full catalog
+        kept out (in ``confirmed`` too; the estimator must forget the old landmark before it
+        takes ``history``); also in ``unresolved`` (key ``"<name> retracted"``).
     n_hypotheses : int
         Live hypotheses after this movement.
     pose : MovementPose or None
@@ -125,6 +130,7 @@ class MovementAssociation:
     not_visible: dict[str, str] = field(default_factory=dict)
     outcomes: dict[str, list[Outcome]] = field(default_factory=dict)
     doubtful: dict[str, str] = field(default_factory=dict)
+    retracted: dict[str, str] = field(default_factory=dict)
     n_hypotheses: int = 0
     pose: MovementPose | None = None
 
@@ -531,15 +537,20 @@ class Associator:
             if h.keys & taken or rivals:
                 continue  # its pairing is still disputed: wait for later movements
             taken |= h.keys
-            if len(self.named[label]) >= self.capacity[label]:
-                out.unresolved[f"{label} beyond catalog"] = (
-                    f"a landmark of {label} fits {len(h.rays)} keyframes at "
-                    f"({h.point_fl[0]:.2f}, {h.point_fl[1]:.2f}) FL but the catalog has "
-                    f"{self.capacity[label]} of {label}, all named; not mapped"
-                )
-                continue
-            name = slot_name(label, len(self.named[label]) + 1)
-            self.named[label].append(name)
+            if len(self.named[label]) < self.capacity[label]:
+                name = slot_name(label, len(self.named[label]) + 1)
+                self.named[label].append(name)
+            else:
+                weakest = self._most_doubtful(label)
+                if weakest is None:
+                    out.unresolved[f"{label} beyond catalog"] = (
+                        f"a landmark of {label} fits {len(h.rays)} keyframes at "
+                        f"({h.point_fl[0]:.2f}, {h.point_fl[1]:.2f}) FL but the catalog has "
+                        f"{self.capacity[label]} of {label}, all named; not mapped"
+                    )
+                    continue
+                name = weakest
+                self._retract(label, name, h, lines[id(h)], out)
             self.unmapped[name] = h
             self.support[name] = Support(out.index)
             out.confirmed.append(name)
@@ -548,6 +559,34 @@ class Associator:
                 if r.movement == out.index:
                     out.names[label][r.end][r.detection] = name
         self.hypotheses[label] = [h for h in self.hypotheses[label] if not h.keys & taken]
+
+    def _most_doubtful(self, label: str) -> str | None:
+        """The named landmark of ``label`` seen at the smallest share of its predictions among
+        the doubtful ones (None: none is doubtful)."""
+        doubtful = [
+            (s.seen / max(s.predicted, 1), -s.predicted, n)
+            for n in self.named[label]
+            if (s := self.support[n]).doubt() is not None
+        ]
+        return min(doubtful)[2] if doubtful else None
+
+    def _retract(
+        self, label: str, name: str, h: Hypothesis, lines: int, out: MovementAssociation
+    ) -> None:
+        """Take ``name`` from the doubtful landmark it was given to (the estimator forgets it
+        and every bearing given to it) and give it to ``h``, which the full catalog kept out."""
+        out.retracted[name] = (
+            f"{self.support[name].doubt()}; retracted: the name goes to a landmark of {label} "
+            f"seen along {lines} lines of sight at ({h.point_fl[0]:.2f}, {h.point_fl[1]:.2f}) "
+            "FL, kept out while the catalog was full"
+        )
+        out.unresolved[f"{name} retracted"] = out.retracted[name]
+        out.doubtful.pop(name, None)
+        out.unresolved.pop(f"{name} doubtful", None)
+        out.bearings_o1_rad.pop(name, None)
+        out.bearings_o2_rad.pop(name, None)
+        for end in (0, 1):
+            out.names[label][end][:] = [None if n == name else n for n in out.names[label][end]]
 
     def _replace(self, trajectory: Mapping[int, MovementPose]) -> None:
         """Place the rays of hypotheses and unmapped named landmarks on ``trajectory``."""

@@ -757,6 +757,24 @@ class JointSlam:
             out[name] = LandmarkEstimate(self._point(name), 0.5 * (cov + cov.T))
         self._estimates = out
 
+    def forget(self, name: str) -> None:
+        """Take landmark ``name`` out of the map with every bearing given to it so far (an
+        association step found its name wrong); :meth:`add_history` may give it again."""
+        if name in self.reference or name not in self._lm_index:
+            return
+        for m in (*self._placed.values(), *self._waiting.values()):
+            m.bearings[:] = [b for b in m.bearings if b.landmark != name]
+        self._pending.pop(name, None)
+        self._rejected = {b for b in self._rejected if b.landmark != name}
+        self.paper.forget(name)
+        self._estimates.pop(name, None)
+        if name in self._in_graph:
+            self._in_graph.discard(name)
+            values = gtsam.Values(self._values)
+            values.erase(self._key(name))
+            self._rebuild(values)
+            self._update_estimates()
+
     def add_history(self, name: str, bearings: Sequence[tuple[int, int, float]]) -> None:
         """Bearings of ``name`` from movements already in the graph, known only now.
 

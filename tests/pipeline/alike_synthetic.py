@@ -119,6 +119,8 @@ def run_synthetic(
         t_assoc = time.perf_counter()
         assoc.hypothesize(a, pose, slam.estimates, trajectory)
         out.association_seconds += time.perf_counter() - t_assoc
+        for name in a.retracted:
+            slam.forget(name)
         for name, hist in a.history.items():
             slam.add_history(name, hist)  # type: ignore[attr-defined]
         out.results.append(a)

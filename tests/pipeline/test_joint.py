@@ -401,3 +401,49 @@ def test_distance_prior_lowers_the_error_on_the_paper_arena() -> None:
         gains.append(err[0] - err[1])
     g = np.array(gains)
     assert g.mean() > 2.0 * g.std() / math.sqrt(g.size)
+
+
+def test_a_forgotten_landmark_leaves_no_trace_and_can_come_back() -> None:
+    # L3 given wrong bearings for 5 movements (an association step's wrong name: 40 deg off),
+    # then forgotten: nothing of it is left, and its later true bearings bring it back where
+    # it is
+    run = simulate_bearings(10, np.random.default_rng(5), eps_rad=EPS)
+    wrong = run
+    for k in range(5):
+        wrong = _edit(wrong, k, "L3", math.radians(40.0))
+        b1 = dict(wrong.observations[k].bearings_o1_rad)
+        if "L3" in b1:
+            b1["L3"] += math.radians(40.0)
+        obs = list(wrong.observations)
+        obs[k] = replace(obs[k], bearings_o1_rad=b1)
+        wrong = replace(wrong, observations=obs)
+    slam = _slam(wrong, PAPER_REFERENCE, 0)
+    for obs in wrong.observations[:5]:
+        slam.process_movement(obs)
+    assert "L3" in slam.estimates
+    slam.forget("L3")
+    assert "L3" not in slam.estimates
+    assert not any(b.landmark == "L3" for m in slam._placed.values() for b in m.bearings)
+    assert "L3" not in slam.paper.estimates  # the initializer starts it afresh
+
+    def without_l3(o: MovementObservation) -> MovementObservation:
+        return replace(
+            o,
+            bearings_o1_rad={k: v for k, v in o.bearings_o1_rad.items() if k != "L3"},
+            bearings_o2_rad={k: v for k, v in o.bearings_o2_rad.items() if k != "L3"},
+        )
+
+    never = _slam(run, PAPER_REFERENCE, 0)
+    for obs in run.observations[:5]:
+        never.process_movement(without_l3(obs))
+    # the rest of the map: where a map that never had L3 puts it, within that map's own
+    # uncertainty (the noise model tuned with the wrong bearings is kept: 0.015 FL here)
+    drift = np.hypot(*(slam.estimates["L4"].mean_fl - never.estimates["L4"].mean_fl))
+    assert drift < np.sqrt(np.linalg.eigvalsh(never.estimates["L4"].cov_fl)).min()
+    # from movement 5 on L3's true bearings: it comes back as in the map that first saw it then
+    for obs in wrong.observations[5:]:
+        slam.process_movement(obs)
+        never.process_movement(obs)
+    back, first = slam.estimates["L3"], never.estimates["L3"]
+    assert np.hypot(*(back.mean_fl - first.mean_fl)) < 0.1 * np.sqrt(first.cov_fl.trace())
+    # (kept, the wrong bearings had put it 2.9 FL off by movement 5)
