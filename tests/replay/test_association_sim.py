@@ -19,6 +19,13 @@ from replay.cli import cli
 from replay.experiments.run import simulate
 
 
+def _simulated(camera: str, seed: int, folder: Path) -> tuple[Path, Score]:
+    """Simulate the 8-landmark layout of ``seed`` with ``camera`` into ``folder``; score it."""
+    log = folder / f"{camera}_{seed}.mcap"
+    simulate(alike_scenario(8, camera, layout_seed=seed), log, seed=seed)
+    return log, score_log(log)
+
+
 @pytest.fixture(
     scope="module",
     # the omni run takes about 5 s: CI runs it with -m slow
@@ -27,9 +34,7 @@ from replay.experiments.run import simulate
 )
 def scored(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Score:
     camera, seed = request.param
-    log = tmp_path_factory.mktemp(f"alike_{camera}") / "run.mcap"
-    simulate(alike_scenario(8, camera, layout_seed=seed), log, seed=seed)
-    return score_log(log)
+    return _simulated(camera, seed, tmp_path_factory.mktemp(f"alike_{camera}"))[1]
 
 
 def test_detections_are_associated_correctly(scored: Score) -> None:
@@ -71,9 +76,7 @@ def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
     # the test counts landmarks, not runs.
     named = 0
     for seed in range(1, 7):
-        log = tmp_path / f"{camera}_{seed}.mcap"
-        simulate(alike_scenario(8, camera, layout_seed=seed), log, seed=seed)
-        s = score_log(log)
+        _, s = _simulated(camera, seed, tmp_path)
         assert s.wrong_share <= 0.02, (seed, s.wrong_share)
         assert s.correct_share >= 0.98, (seed, s.correct_share)
         assert len(set(s.matched.values())) == s.n_named <= 8  # none invented
@@ -94,9 +97,7 @@ def test_a_doubtful_name_is_retracted_for_a_landmark_the_full_catalog_kept_out(
     # 1 cm when nothing took the name back; seen at few of their predictions they become
     # doubtful, and once every name is given and a real landmark is confirmed, the most
     # doubtful name goes to it: the final map has all 8 on their landmarks
-    log = tmp_path / f"{camera}_{seed}.mcap"
-    simulate(alike_scenario(8, camera, layout_seed=seed), log, seed=seed)
-    s = score_log(log)
+    _, s = _simulated(camera, seed, tmp_path)
     retracted = {
         k.removesuffix(" retracted"): why
         for m in s.summary["movements"]
@@ -121,9 +122,7 @@ def test_names_off_their_landmark_are_reported_doubtful(
     # names on real landmarks are not
     from replay.process import result_line
 
-    log = tmp_path / f"{camera}_{seed}.mcap"
-    simulate(alike_scenario(8, camera, layout_seed=seed), log, seed=seed)
-    s = score_log(log)
+    log, s = _simulated(camera, seed, tmp_path)
     off = {n for n, e in s.errors_m.items() if e > 0.10}
     assert off  # the layout still fools the confirmation: else this test tests nothing
     doubtful = s.summary["association"]["doubtful"]
