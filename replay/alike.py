@@ -3,8 +3,9 @@
 :class:`AlikeLandmarks` turns a movement's keyframe detections into what the associator takes
 (bearings of landmarks with a class of their own, blobs per shared class), gives the estimator
 the named landmarks' bearings, and after the estimator has placed the movement lets the
-associator grow its hypotheses and hands the estimator the earlier bearings of landmarks named
-now (:meth:`pipeline.joint.JointSlam.add_history`).
+associator grow its hypotheses, makes the estimator forget the landmarks whose names were
+taken back, and hands it the earlier bearings of landmarks named now
+(:meth:`pipeline.joint.JointSlam.add_history`).
 """
 
 from __future__ import annotations

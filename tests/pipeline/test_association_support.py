@@ -3,6 +3,8 @@ since it was named (:mod:`pipeline.association.support`), on counts and on synth
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from alike_synthetic import run_synthetic
 
@@ -32,9 +34,7 @@ def test_a_name_mostly_seen_is_not_doubtful() -> None:
 
 def test_a_name_seen_too_rarely_is_doubtful_and_says_why() -> None:
     n = DOUBT_MIN_PREDICTIONS
-    seen = int(DOUBT_SEEN_SHARE * n)
-    if seen >= DOUBT_SEEN_SHARE * n:
-        seen -= 1
+    seen = math.ceil(DOUBT_SEEN_SHARE * n) - 1  # the most sightings still short of the share
     why = _support(*(["seen"] * seen + ["contested"] * (n - seen))).doubt()
     assert why is not None
     assert f"seen at {seen} of {n} keyframes" in why
