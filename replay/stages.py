@@ -273,10 +273,13 @@ class Runner:
         )
         for sink in self.sinks:
             sink.frame(frame)
-        for key in keys:
-            self.state.keyframes[key] = _Keyframe(t_ns, log_time_ns, detections)
+        # two frames may share a time stamp (a turn too short to take a clock tick): the later
+        # one is the keyframe of movements still to come, not of one already run
         for index, phase in keys:
-            if phase == "end":
+            if index not in self.state.done:
+                self.state.keyframes[index, phase] = _Keyframe(t_ns, log_time_ns, detections)
+        for index, phase in keys:
+            if phase == "end" and index not in self.state.done:
                 self._movement(index)
 
     def _movement(self, index: int) -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import base64
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Any
 
@@ -104,8 +104,12 @@ def write_log(
     extra: Callable[[LogWriter], None] | None = None,
     finish: bool = True,
     between: int = 1,
+    instant: Collection[int] = (),
 ) -> Path:
-    """Write a log of ``moves`` (keyframes at both ends, ``between`` frames in between)."""
+    """Write a log of ``moves`` (keyframes at both ends, ``between`` frames in between).
+
+    A movement in ``instant`` starts at the time stamp its predecessor ended (a turn too short
+    to take a clock tick): two frames then share one time stamp, each the keyframe of one."""
     clock = VirtualClock()
     epoch = EpochClock(clock)
     writer = LogWriter(path, session_doc() if doc is None else doc, clock=epoch, fsync=False)
@@ -123,7 +127,8 @@ def write_log(
                     writer.write(
                         "/camera/panorama", frame_msg(epoch.monotonic_ns(), render(mx, my, h))
                     )
-            clock.advance_ns(100_000_000)
+            if not (phase == "start" and index in instant):
+                clock.advance_ns(100_000_000)
             t = epoch.monotonic_ns()
             writer.write(
                 "/sim/ground_truth", {"timestamp": stamp_from_ns(t), "x": px, "y": py, "heading": h}

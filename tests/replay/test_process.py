@@ -113,6 +113,20 @@ def test_occluded_landmark_is_reported_not_used(tmp_path: Path) -> None:
     assert all(m["bearings_deg"]["L4"][1] is None for m in doc["movements"])
 
 
+def test_two_frames_at_one_time_stamp_are_two_keyframes(tmp_path: Path) -> None:
+    # movement 1 starts at the tick movement 0 ended (a turn too short to take a tick): its
+    # start frame shares the end frame's time stamp and comes after movement 0 has run
+    method = MethodConfig(n_l=150, seed=7)
+    plain = process_log(write_log(tmp_path / "plain.mcap"), method)
+    log = write_log(tmp_path / "instant.mcap", instant={1})
+    doc = process_log(log, method)
+    assert [m["status"] for m in doc["movements"]] == ["ok"] * len(MOVES)
+    for got, want in zip(doc["movements"], plain["movements"], strict=True):
+        assert got["bearings_deg"] == want["bearings_deg"]  # each keyframe its own frame
+    start_1 = doc["movements"][1]["bearings_deg"]["L1"][0]
+    assert start_1 != doc["movements"][0]["bearings_deg"]["L1"][1]
+
+
 def test_joint_maps_a_landmark_seen_only_at_single_keyframes(tmp_path: Path) -> None:
     # L4 is never seen at both ends of a movement: the paper cannot use it, the joint map can
     log = write_log(tmp_path / "occl.mcap", hidden=lambda i, ph: ("L4",) if ph == "end" else ())
