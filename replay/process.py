@@ -126,4 +126,7 @@ def result_line(doc: dict[str, Any]) -> str:
             text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
         if assoc.get("doubtful"):
             text += f"; doubtful: {', '.join(assoc['doubtful'])} (seen too rarely where predicted)"
+        if assoc.get("unconfirmed"):
+            names = ", ".join(assoc["unconfirmed"])
+            text += f"; unconfirmed: {names} (seen too few times since named to tell)"
     return text

@@ -194,6 +194,9 @@ class MovementRecord:
     doubtful_landmarks : dict name -> reason or None
         Named landmarks of shared classes whose predictions since their naming were too rarely
         seen (:mod:`pipeline.association.support`); None where association did not run.
+    unconfirmed_landmarks : dict name -> reason or None
+        Named landmarks of shared classes, not doubtful, seen at too few keyframes since their
+        naming to confirm the name; None where association did not run.
     also_placed : tuple of int
         Joint estimator: earlier movements that had to wait and entered the map with this one.
     """
@@ -224,6 +227,7 @@ class MovementRecord:
     not_visible: Mapping[str, str] = field(default_factory=dict)
     named_landmarks: Sequence[str] = ()
     doubtful_landmarks: Mapping[str, str] | None = None
+    unconfirmed_landmarks: Mapping[str, str] | None = None
 
     @property
     def ok(self) -> bool:

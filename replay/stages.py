@@ -345,6 +345,7 @@ class Runner:
                     not_visible=dict(assoc.not_visible),
                     named_landmarks=assoc.confirmed,
                     doubtful_landmarks=dict(assoc.doubtful),
+                    unconfirmed_landmarks=dict(assoc.unconfirmed),
                 )
         if not record.ok:
             logger.warning("%s: movement %d %s", self.log.name, index, record.status)

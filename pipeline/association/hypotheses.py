@@ -110,10 +110,10 @@ def fit(
         point = found.point_fl
     d = point - origins
     ang = np.arctan2(d[:, 1], d[:, 0])
-    if float(np.abs(wrap_rad(ang[:, None] - ang[None, :])).max()) < MIN_PARALLAX_EPS * eps_rad:
+    err = np.abs(wrap_rad(ang - dirs))
+    if float(err.max()) > tol:  # every ray must agree: no outlier dropped here
         return None
-    err = np.abs(np.angle(np.exp(1j * (ang - dirs))))
-    if np.any(err > tol):  # every ray must agree: no outlier dropped here
+    if float(np.abs(wrap_rad(ang[:, None] - ang[None, :])).max()) < MIN_PARALLAX_EPS * eps_rad:
         return None
     cov = ray_point_cov(point, origins, sigma_rad)
     keys = {(r.movement, r.end, r.detection) for r in rays}
@@ -133,13 +133,16 @@ def _least_squares(
 ) -> NDArray[np.float64] | None:
     """Point (2,) nearest the rays in angle: perpendicular distances weighted by
     ``1 / range^2`` from the current point, twice from ``guess_fl``; None if degenerate."""
-    nrm = np.column_stack((-np.sin(dirs_rad), np.cos(dirs_rad)))
-    rhs = (nrm * origins_fl).sum(axis=1)
-    p = np.asarray(guess_fl, np.float64)
+    nx, ny = -np.sin(dirs_rad), np.cos(dirs_rad)
+    rhs = nx * origins_fl[:, 0] + ny * origins_fl[:, 1]
+    px, py = float(guess_fl[0]), float(guess_fl[1])
     for _ in range(2):
-        w = 1.0 / np.maximum(((p - origins_fl) ** 2).sum(axis=1), 1e-9)
-        a = (nrm * w[:, None]).T @ nrm
-        if abs(float(np.linalg.det(a))) < 1e-12 * float(np.trace(a)) ** 2:
+        w = 1.0 / np.maximum((px - origins_fl[:, 0]) ** 2 + (py - origins_fl[:, 1]) ** 2, 1e-9)
+        wx, wy = w * nx, w * ny
+        axx, axy, ayy = float(wx @ nx), float(wx @ ny), float(wy @ ny)
+        det = axx * ayy - axy * axy
+        if abs(det) < 1e-12 * (axx + ayy) ** 2:
             return None
-        p = np.linalg.solve(a, (nrm * w[:, None]).T @ rhs)
-    return p
+        bx, by = float(wx @ rhs), float(wy @ rhs)
+        px, py = (ayy * bx - axy * by) / det, (axx * by - axy * bx) / det
+    return np.array([px, py])

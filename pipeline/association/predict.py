@@ -60,8 +60,11 @@ def ray_point_cov(
     ridge keeps the inverse finite when the rays are parallel.
     """
     d = np.asarray(point_fl, np.float64) - np.asarray(origins_fl, np.float64).reshape(-1, 2)
-    r2 = np.maximum((d**2).sum(axis=1), 1e-12)
-    n = np.column_stack((-d[:, 1], d[:, 0])) / np.sqrt(r2)[:, None]
-    info = (n / (r2 * sigma_rad**2)[:, None]).T @ n + 1e-9 * np.eye(2)
-    cov: NDArray[np.float64] = np.linalg.inv(info)
-    return cov
+    dx, dy = d[:, 0], d[:, 1]
+    w = 1.0 / (np.maximum(dx * dx + dy * dy, 1e-12) ** 2 * sigma_rad**2)  # 1 / (r^2 sigma)^2
+    # information sum of n n^T w with n = (-dy, dx) / r, plus the ridge; inverted in closed form
+    ixx = float(w @ (dy * dy)) + 1e-9
+    ixy = -float(w @ (dx * dy))
+    iyy = float(w @ (dx * dx)) + 1e-9
+    det = ixx * iyy - ixy * ixy
+    return np.array([[iyy, -ixy], [-ixy, ixx]]) / det

@@ -9,7 +9,9 @@ where no landmark stands mostly is not (its predictions meet no blob, or a blob 
 landmark explains as well). :class:`Support` counts each prediction's outcome;
 :meth:`Support.doubt` says when the name is doubtful. Measured on simulated runs of 8
 identical landmarks (docs/RESULTS.md): names more than 10 cm off any landmark were seen at 0-35
-% of their predictions, correct names mostly at 80-100 %.
+% of their predictions, correct names mostly at 80-100 %. A name seen at too few keyframes
+since its naming for either to show is unconfirmed (:meth:`Support.unconfirmed`): reported, as
+the name has not yet been put to the test.
 """
 
 from __future__ import annotations
@@ -28,6 +30,9 @@ DOUBT_MIN_PREDICTIONS = 6
 DOUBT_SEEN_SHARE = 1.0 / 3.0
 #: or predicted at this many and seen at none.
 DOUBT_NEVER_SEEN = 2
+#: A name not doubtful is confirmed once seen at this many keyframes since it was named (two
+#: movements' worth, beyond the three lines of sight that named it).
+CONFIRM_MIN_SEEN = 4
 
 
 @dataclass
@@ -67,4 +72,13 @@ class Support:
             f"seen at {self.seen} of {n} keyframes where predicted since it was named "
             f"(movement {self.named_at}; {self.missed} missed, {self.contested} contested, "
             f"{self.vague} too uncertain): it may stand where rays of several landmarks meet"
+        )
+
+    def unconfirmed(self) -> str | None:
+        """Why the name is not confirmed yet (None: it is, or it is doubtful instead)."""
+        if self.seen >= CONFIRM_MIN_SEEN or self.doubt() is not None:
+            return None
+        return (
+            f"seen at {self.seen} keyframe(s) since it was named (movement {self.named_at}); "
+            f"{CONFIRM_MIN_SEEN} confirm a name"
         )

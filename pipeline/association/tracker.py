@@ -23,8 +23,9 @@ For each movement (its two keyframes, O1 and O2):
 
 5. What became of each named landmark's predictions since it was named (seen, missed,
    contested, too uncertain) is counted (:mod:`pipeline.association.support`); a name seen too
-   rarely is reported as doubtful every movement while it stays so. When the class's catalog
-   is full and a hypothesis is confirmed, the most doubtful name is retracted and given to it.
+   rarely is reported as doubtful every movement while it stays so, a name not seen often
+   enough since its naming to tell as unconfirmed. When the class's catalog is full and a
+   hypothesis is confirmed, the most doubtful name is retracted and given to it.
 
 Whatever is left unresolved (contested detections, unexplained detections, a class beyond its
 catalog count, a movement that cannot be placed, a doubtful name) is reported in the movement's
@@ -110,6 +111,10 @@ class MovementAssociation:
         Named landmarks whose predictions since their naming were too rarely seen
         (:meth:`~pipeline.association.support.Support.doubt`), with why; also in
         ``unresolved`` (key ``"<name> doubtful"``).
+    unconfirmed : dict name -> str
+        Named landmarks, not doubtful, seen at too few keyframes since their naming to confirm
+        the name (:meth:`~pipeline.association.support.Support.unconfirmed`), with why; names
+        given with this movement included.
     retracted : dict name -> str
         Doubtful names taken back with this movement and given to a landmark a full catalog
         kept out (in ``confirmed`` too; the estimator must forget the old landmark before it
@@ -130,6 +135,7 @@ class MovementAssociation:
     not_visible: dict[str, str] = field(default_factory=dict)
     outcomes: dict[str, list[Outcome]] = field(default_factory=dict)
     doubtful: dict[str, str] = field(default_factory=dict)
+    unconfirmed: dict[str, str] = field(default_factory=dict)
     retracted: dict[str, str] = field(default_factory=dict)
     n_hypotheses: int = 0
     pose: MovementPose | None = None
@@ -278,7 +284,8 @@ class Associator:
         return out
 
     def _weigh(self, out: MovementAssociation) -> None:
-        """Count the outcomes of this movement's predictions; report doubtful names."""
+        """Count the outcomes of this movement's predictions; report doubtful and unconfirmed
+        names."""
         for name, outcomes in out.outcomes.items():
             support = self.support.get(name)
             if support is not None and support.named_at < out.index:
@@ -289,6 +296,8 @@ class Associator:
             if why is not None:
                 out.doubtful[name] = why
                 out.unresolved[f"{name} doubtful"] = why
+            elif (young := support.unconfirmed()) is not None:
+                out.unconfirmed[name] = young
 
     def _assign_named(
         self, index: int, pose: MovementPose, pos_std: float, mapped: Mapping[str, LandmarkEstimate]
@@ -553,6 +562,8 @@ class Associator:
                 self._retract(label, name, h, lines[id(h)], out)
             self.unmapped[name] = h
             self.support[name] = Support(out.index)
+            if (young := self.support[name].unconfirmed()) is not None:
+                out.unconfirmed[name] = young
             out.confirmed.append(name)
             out.history[name] = [(r.movement, r.end, r.bearing_rad) for r in h.rays]
             for r in h.rays:

@@ -359,6 +359,11 @@ class RerunSink:
                 log(f"map/particles/{name}", rr.Clear(recursive=False))
         names = [n for n in record.estimates if n not in run.session.reference]
         doubtful = record.doubtful_landmarks or {}
+        unconfirmed = record.unconfirmed_landmarks or {}
+        status = {
+            **{n: " (unconfirmed)" for n in unconfirmed},
+            **{n: " (doubtful)" for n in doubtful},
+        }
         if names:
             log(
                 "map/estimates",
@@ -366,7 +371,7 @@ class RerunSink:
                     np.array([record.estimates[n].mean_fl for n in names]),
                     colors=[self._rgb[n] for n in names],
                     radii=rr.Radius.ui_points(5.0),
-                    labels=[f"{n} (doubtful)" if n in doubtful else n for n in names],
+                    labels=[n + status.get(n, "") for n in names],
                 ),
             )
         for name, why in doubtful.items():

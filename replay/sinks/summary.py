@@ -13,11 +13,12 @@ their landmarks are named by association (``red#1``, ... in order of confirmatio
 :mod:`pipeline.association`). ``movements[k].ambiguous_landmarks`` (key -> reason) is what
 movement k left unresolved (contested or unexplained detections, a movement not placed),
 ``not_visible`` the named landmarks predicted but not detected, ``named_landmarks`` those named
-with it; ``association`` sums up the names per class, the catalog counts, the movements with
-something unresolved, the names still ``doubtful`` after the last movement (name -> why:
-seen too rarely where predicted since named) and, for simulated logs, ``matched_truth``
-(each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
-measured against it).
+with it, ``unconfirmed_landmarks`` the names not yet seen often enough since their naming to
+tell; ``association`` sums up the names per class, the catalog counts, the movements with
+something unresolved, the names still ``doubtful`` after the last movement (name -> why: seen
+too rarely where predicted since named), those still ``unconfirmed`` (name -> why) and, for
+simulated logs, ``matched_truth`` (each ``red#k`` matched to the nearest true landmark of its
+class, one-to-one; ``error_m`` is measured against it).
 """
 
 from __future__ import annotations
@@ -69,6 +70,7 @@ class SummarySink:
         self._reinitializations = 0
         self._matched: dict[str, str] = {}
         self._doubtful: dict[str, str] = {}
+        self._unconfirmed: dict[str, str] = {}
 
     def start(self, run: RunInfo) -> None:
         self._run = run
@@ -133,6 +135,10 @@ class SummarySink:
             entry["named_landmarks"] = list(record.named_landmarks)
         if record.doubtful_landmarks is not None:
             self._doubtful = dict(record.doubtful_landmarks)
+        if record.unconfirmed_landmarks is not None:
+            self._unconfirmed = dict(record.unconfirmed_landmarks)
+            if self._unconfirmed:
+                entry["unconfirmed_landmarks"] = dict(self._unconfirmed)
         if record.ok:
             self._landmarks = {
                 name: _estimate(e) for name, e in record.estimates.items() if name not in reference
@@ -188,5 +194,7 @@ class SummarySink:
         }
         if self._doubtful:
             self.document["association"]["doubtful"] = dict(sorted(self._doubtful.items()))
+        if self._unconfirmed:
+            self.document["association"]["unconfirmed"] = dict(sorted(self._unconfirmed.items()))
         if self._matched:
             self.document["association"]["matched_truth"] = dict(sorted(self._matched.items()))

@@ -1,5 +1,6 @@
-"""When a named landmark of a shared class becomes doubtful: seen too rarely where predicted
-since it was named (:mod:`pipeline.association.support`), on counts and on synthetic runs."""
+"""When a named landmark of a shared class becomes doubtful (seen too rarely where predicted
+since it was named) or stays unconfirmed (seen too few times to tell;
+:mod:`pipeline.association.support`), on counts and on synthetic runs."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import pytest
 from alike_synthetic import run_synthetic
 
 from pipeline.association.support import (
+    CONFIRM_MIN_SEEN,
     DOUBT_MIN_PREDICTIONS,
     DOUBT_NEVER_SEEN,
     DOUBT_SEEN_SHARE,
@@ -49,6 +51,40 @@ def test_a_name_never_seen_again_is_doubtful_early() -> None:
     assert _support(*outcomes[:-1]).doubt() is None
     why = _support(*outcomes).doubt()
     assert why is not None and "seen at 0 of" in why
+
+
+def test_a_name_is_unconfirmed_until_seen_enough_and_never_both() -> None:
+    young = _support(*(["seen"] * (CONFIRM_MIN_SEEN - 1)))
+    why = young.unconfirmed()
+    assert why is not None and f"seen at {CONFIRM_MIN_SEEN - 1} keyframe(s)" in why
+    assert "movement 3" in why and young.doubt() is None
+    assert _support().unconfirmed() is not None  # just named
+    assert _support(*(["seen"] * CONFIRM_MIN_SEEN)).unconfirmed() is None
+    # confirmed: misses later make it doubtful, never unconfirmed again
+    misses: list[Outcome] = ["missed"] * (3 * CONFIRM_MIN_SEEN)
+    faded = _support(*(["seen"] * CONFIRM_MIN_SEEN + misses))
+    assert faded.doubt() is not None and faded.unconfirmed() is None
+    # a name both rarely seen and seen few times is reported once, as doubtful
+    never = _support(*(["missed"] * DOUBT_NEVER_SEEN))
+    assert never.doubt() is not None and never.unconfirmed() is None
+
+
+def test_names_are_unconfirmed_from_their_naming_until_seen_enough() -> None:
+    run = run_synthetic(8, 4)  # names every landmark by movement 16, none ever doubtful
+    for name, support in run.associator.support.items():
+        named_at = support.named_at
+        statuses = [r for r in run.results if r.index >= named_at]
+        assert name in statuses[0].unconfirmed  # reported from the movement that names it
+        flagged = [r.index for r in statuses if name in r.unconfirmed]
+        # a prefix of the movements since, until seen at CONFIRM_MIN_SEEN keyframes
+        assert flagged == list(range(named_at, named_at + len(flagged)))
+        if support.seen >= CONFIRM_MIN_SEEN:
+            assert flagged[-1] < 19
+        else:
+            assert flagged[-1] == 19 and name in run.results[-1].unconfirmed
+    # seed 4 sees most names often enough to confirm them by the end
+    confirmed = [n for n in run.associator.support if n not in run.results[-1].unconfirmed]
+    assert len(confirmed) >= 6
 
 
 @pytest.mark.slow  # two 20-movement runs, about 2 s

@@ -138,3 +138,37 @@ def test_names_off_their_landmark_are_reported_doubtful(
     assert {n.removesuffix(" (doubtful)") for n in last if n.endswith(" (doubtful)")} == off
     texts = [t for r in rows["/log"] for t in r.get("TextLog:text") or ()]
     assert all(any(f"{n} doubtful: seen at" in t for t in texts) for n in off)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 66), ("omni", 48)])
+def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
+    camera: str, seed: int, tmp_path: Path
+) -> None:
+    # layouts where a wrong name is seen too few times after its naming for the doubt rule to
+    # judge it (unwrapped 66: named with movement 17, 24 cm off; omni 48: 61 cm off, seen at 3
+    # keyframes since): it ends unconfirmed in the summary, its result line and Rerun; names on
+    # their landmarks seen often since end confirmed (one named late may be unconfirmed too)
+    from replay.process import result_line
+
+    log, s = _simulated(camera, seed, tmp_path)
+    off = {n for n, e in s.errors_m.items() if e > 0.10}
+    assert off  # the layout still fools the confirmation: else this test tests nothing
+    unconfirmed = s.summary["association"]["unconfirmed"]
+    assert off <= set(unconfirmed) and "doubtful" not in s.summary["association"]
+    assert len(unconfirmed) <= len(off) + 1 and len(s.errors_m) >= 6
+    assert all("keyframe(s) since it was named" in why for why in unconfirmed.values())
+    assert f"unconfirmed: {', '.join(sorted(unconfirmed))}" in result_line(s.summary)
+    # per movement, from the one that names it on
+    moves = s.summary["movements"]
+    for name in off:
+        named = next(m["index"] for m in moves if name in m.get("named_landmarks", ()))
+        flagged = [m["index"] for m in moves if name in m.get("unconfirmed_landmarks", {})]
+        assert flagged[0] == named and flagged[-1] == moves[-1]["index"]
+    rrd = tmp_path / "run.rrd"
+    result = CliRunner().invoke(cli, ["replay", str(log), "--save", str(rrd)])
+    assert result.exit_code == 0, result.output
+    rows = _read(rrd)
+    last = [r["Points2D:labels"] for r in rows["/map/estimates"] if r.get("Points2D:labels")][-1]
+    labelled = {n.removesuffix(" (unconfirmed)") for n in last if n.endswith(" (unconfirmed)")}
+    assert off <= labelled <= set(unconfirmed)  # a name not in the map yet has no label
