@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from data_schemas.angles import wrap_rad
+from data_schemas.angles import TWO_PI, wrap_rad
 
 #: Candidate start points per axis of the resection's grid search.
 GRID_STEPS = 9
@@ -110,39 +110,57 @@ def _heading_from(s: Sightings, o1_fl: NDArray[np.float64]) -> NDArray[np.float6
     return out
 
 
+_Terms = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float, float]
+
+
+def _at(s: Sightings, x: NDArray[np.float64]) -> _Terms:
+    """Offsets keyframe -> point (dx, dy: (k,)) at movement parameters ``x`` (4,), each
+    sighting's distance from O1 along the movement (k,), and cos h, sin h."""
+    h = float(x[2])
+    length = math.exp(min(max(float(x[3]), -LOG_LENGTH_BOUND), LOG_LENGTH_BOUND))
+    d: NDArray[np.float64] = length * s.end.astype(np.float64)
+    c, sn = math.cos(h), math.sin(h)
+    dx: NDArray[np.float64] = s.points_fl[:, 0] - (x[0] + d * c)
+    dy: NDArray[np.float64] = s.points_fl[:, 1] - (x[1] + d * sn)
+    return dx, dy, d, c, sn
+
+
+def _residuals_at(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:meth:`Sightings.residuals` for one parameter vector ``x`` (4,) (scalar heading terms)."""
+    dx, dy, *_ = _at(s, x)
+    r = s.bearings_rad - (np.arctan2(dy, dx) - float(x[2]))
+    out: NDArray[np.float64] = r - TWO_PI * np.floor((r + math.pi) * (1.0 / TWO_PI))
+    return out
+
+
 def _jacobian(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
     """d(predicted bearing)/d(x, y, h, log d) (k, 4) at parameters ``x`` (4,)."""
-    h, d = x[2], float(_length(x[3])) * s.end
-    c, sn = math.cos(h), math.sin(h)
-    dx = s.points_fl[:, 0] - (x[0] + d * c)
-    dy = s.points_fl[:, 1] - (x[1] + d * sn)
+    dx, dy, d, c, sn = _at(s, x)
     r2 = np.maximum(dx * dx + dy * dy, 1e-300)
-    da_dox = dy / r2  # d atan2(dy, dx) / d(observer x)
-    da_doy = -dx / r2
-    return np.column_stack(
-        (
-            da_dox,
-            da_doy,
-            -1.0 + da_dox * (-d * sn) + da_doy * (d * c),
-            da_dox * (d * c) + da_doy * (d * sn),
-        )
-    )
+    jac = np.empty((dx.size, 4))
+    jac[:, 0] = da_dox = dy / r2  # d atan2(dy, dx) / d(observer x)
+    jac[:, 1] = da_doy = -dx / r2
+    jac[:, 2] = -1.0 + da_dox * (-d * sn) + da_doy * (d * c)
+    jac[:, 3] = da_dox * (d * c) + da_doy * (d * sn)
+    return jac
 
 
 def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[np.float64]:
     """Levenberg-Marquardt on the 4 movement parameters."""
     x, lam = x0.copy(), 1e-3
-    r = s.residuals(x)
+    r = _residuals_at(s, x)
     cost = float(r @ r)
+    diag = np.arange(4)
     for _ in range(iters):
         jac = _jacobian(s, x)  # residual = measured - predicted: d residual = -jac
         a = jac.T @ jac
+        a[diag, diag] += lam * (a[diag, diag] + 1e-12)
         try:
-            delta = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), jac.T @ r)
+            delta = np.linalg.solve(a, jac.T @ r)
         except np.linalg.LinAlgError:
             break
         cand = x + delta
-        rc = s.residuals(cand)
+        rc = _residuals_at(s, cand)
         c = float(rc @ rc)
         if c < cost:
             x, r, lam = cand, rc, lam * 0.3
@@ -227,18 +245,18 @@ def resect(
     best: tuple[NDArray[np.float64], float] | None = None
     for x0 in seeds:
         x = _refine(s, x0)
-        r = s.residuals(x)
+        r = _residuals_at(s, x)
         c = float(r @ r)
         if best is None or c < best[1]:
             best = (x, c)
     assert best is not None
     x = best[0]
     keep = np.ones(s.bearings_rad.size, bool)
-    r = s.residuals(x)
+    r = _residuals_at(s, x)
     while outlier_rad is not None and keep.sum() > 4 and np.abs(r[keep]).max() > outlier_rad:
         keep[np.flatnonzero(keep)[np.argmax(np.abs(r[keep]))]] = False  # a wrong detection
         x = _refine(s.subset(keep), x)
-        r = s.residuals(x)
+        r = _residuals_at(s, x)
     jac = _jacobian(s.subset(keep), x)
     info = jac.T @ jac
     if o1_known_fl is not None:  # the turn in place pins O1 (to first order)
@@ -275,21 +293,54 @@ class RayFix:
     rms_rad: float
 
 
+def _solve_sym(
+    axx: NDArray[np.float64],
+    axy: NDArray[np.float64],
+    ayy: NDArray[np.float64],
+    bx: NDArray[np.float64],
+    by: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Solutions of symmetric 2x2 systems ``[[axx, axy], [axy, ayy]] p = b`` (any shape), and
+    which are degenerate (``|det| < 1e-12 trace^2``; their solution is not to be used)."""
+    det = axx * ayy - axy * axy
+    bad = np.abs(det) < 1e-12 * (axx + ayy) ** 2
+    safe = np.where(bad, 1.0, det)
+    return (ayy * bx - axy * by) / safe, (axx * by - axy * bx) / safe, bad
+
+
+def _intersect_many(
+    ox: NDArray[np.float64],
+    oy: NDArray[np.float64],
+    nx: NDArray[np.float64],
+    ny: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Least-squares points of groups of rays (origins ``ox, oy`` and unit normals ``nx, ny``,
+    each (..., k): one group per leading index), squared perpendicular distances, then once
+    more weighted by 1 / range^2 from the first point; x, y (...) and which are degenerate."""
+    rhs = nx * ox + ny * oy
+    w = np.ones_like(ox)
+    px = py = np.zeros(ox.shape[:-1])
+    bad = np.zeros(ox.shape[:-1], bool)
+    for _ in range(2):
+        wx, wy = w * nx, w * ny
+        px, py, now = _solve_sym(
+            (wx * nx).sum(-1),
+            (wx * ny).sum(-1),
+            (wy * ny).sum(-1),
+            (wx * rhs).sum(-1),
+            (wy * rhs).sum(-1),
+        )
+        bad |= now
+        w = 1.0 / np.maximum((px[..., None] - ox) ** 2 + (py[..., None] - oy) ** 2, 1e-9)
+    return px, py, bad
+
+
 def _intersect(
     origins_fl: NDArray[np.float64], u: NDArray[np.float64]
 ) -> NDArray[np.float64] | None:
     """Least-squares point of rays (origins (k, 2), unit directions (k, 2)), range-weighted."""
-    nrm = np.column_stack((-u[:, 1], u[:, 0]))
-    w = np.ones(origins_fl.shape[0])
-    p = None
-    for _ in range(2):
-        a = (nrm * w[:, None]).T @ nrm
-        b = (nrm * w[:, None]).T @ (nrm * origins_fl).sum(axis=1)
-        if abs(float(np.linalg.det(a))) < 1e-12 * float(np.trace(a)) ** 2:
-            return None
-        p = np.linalg.solve(a, b)
-        w = 1.0 / np.maximum(((p - origins_fl) ** 2).sum(axis=1), 1e-9)
-    return p
+    px, py, bad = _intersect_many(origins_fl[:, 0], origins_fl[:, 1], -u[:, 1], u[:, 0])
+    return None if bool(bad) else np.array([float(px), float(py)])
 
 
 def _ray_errors(
@@ -308,30 +359,32 @@ def intersect_rays(
     """Robust intersection of rays (k >= 2) from origins (k, 2) along directions (k,) (FL, rad).
 
     Every pair of rays proposes its crossing; the one that most rays pass within ``inlier_rad``
-    of (ties: smallest squared error) wins, and the least-squares point of those rays (squared
-    perpendicular distances, then once more weighted by 1 / range^2, so that each ray counts by
-    its angular error) is the fix. None if no two rays cross ahead of both.
+    of (ties: smallest squared error, then the first pair in index order) wins, and the
+    least-squares point of those rays (squared perpendicular distances, then once more weighted
+    by 1 / range^2, so that each ray counts by its angular error) is the fix. None if no two
+    rays cross ahead of both.
     """
     k = origins_fl.shape[0]
     if k < 2:
         return None
     u = np.column_stack((np.cos(directions_rad), np.sin(directions_rad)))
-    best: tuple[int, float, NDArray[np.bool_]] | None = None
-    for i in range(k - 1):
-        for j in range(i + 1, k):
-            p = _intersect(origins_fl[[i, j]], u[[i, j]])
-            if p is None:
-                continue
-            err = _ray_errors(p, origins_fl, directions_rad)
-            inl = err <= inlier_rad
-            if not (inl[i] and inl[j]):
-                continue
-            score = (int(inl.sum()), -float((err[inl] ** 2).sum()))
-            if best is None or score > best[:2]:
-                best = (score[0], score[1], inl)
-    if best is None:
+    # every pair's crossing at once; the first of the best in (i, j) order wins, squared errors
+    # equal to rounding counting as equal (two rays alone always cross exactly)
+    i, j = np.triu_indices(k, 1)
+    pair = np.stack((i, j), axis=1)
+    px, py, bad = _intersect_many(origins_fl[pair, 0], origins_fl[pair, 1], -u[pair, 1], u[pair, 0])
+    dx = px[:, None] - origins_fl[None, :, 0]
+    dy = py[:, None] - origins_fl[None, :, 1]
+    err = np.abs(wrap_rad(np.arctan2(dy, dx) - directions_rad[None, :]))  # (pairs, k)
+    inl = err <= inlier_rad
+    rows = np.arange(i.size)
+    ok = ~bad & inl[rows, i] & inl[rows, j]
+    if not ok.any():
         return None
-    inl = best[2]
+    count = inl.sum(axis=1)
+    top = ok & (count == count[ok].max())
+    sq = np.where(top, np.where(inl, err**2, 0.0).sum(axis=1), np.inf)
+    inl = inl[int(np.argmax(sq <= sq.min() + 1e-12 * inlier_rad**2))]
     p = _intersect(origins_fl[inl], u[inl])
     if p is None:
         return None

@@ -60,7 +60,7 @@ def test_association_scaling(benchmark: Any, n: int) -> None:
         assoc_only.append(run.association_seconds)
         without.append(_yardstick(n, seed))
 
-    benchmark.pedantic(once, rounds=3, iterations=1)
+    benchmark.pedantic(once, rounds=7, iterations=1)
     per = 1000.0 * float(np.median(with_assoc)) / MOVES / n
     own = 1000.0 * float(np.median(assoc_only)) / MOVES / n
     yard = 1000.0 * float(np.median(without)) / MOVES / n
