@@ -8,6 +8,7 @@ docs/RESULTS.md.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 from alike_scenarios import alike_scenario
@@ -24,6 +25,25 @@ def _simulated(camera: str, seed: int, folder: Path) -> tuple[Path, Score]:
     log = folder / f"{camera}_{seed}.mcap"
     simulate(alike_scenario(8, camera, layout_seed=seed), log, seed=seed)
     return log, score_log(log)
+
+
+def _off_names(camera: str, seed: int, folder: Path) -> tuple[Path, Score, set[str]]:
+    """A simulated run whose layout fools the confirmation: its names more than 10 cm off."""
+    log, s = _simulated(camera, seed, folder)
+    off = {n for n, e in s.errors_m.items() if e > 0.10}
+    assert off  # the layout still fools the confirmation: else the test tests nothing
+    return log, s, off
+
+
+def _replayed(log: Path, folder: Path) -> tuple[list[str], dict[str, list[dict[str, Any]]]]:
+    """``bslam replay`` of ``log`` read back with Rerun's reader: the map's last labels, and
+    the rows per entity."""
+    rrd = folder / "run.rrd"
+    result = CliRunner().invoke(cli, ["replay", str(log), "--save", str(rrd)])
+    assert result.exit_code == 0, result.output
+    rows = _read(rrd)
+    last = [r["Points2D:labels"] for r in rows["/map/estimates"] if r.get("Points2D:labels")][-1]
+    return list(last), rows
 
 
 @pytest.fixture(
@@ -122,19 +142,13 @@ def test_names_off_their_landmark_are_reported_doubtful(
     # names on real landmarks are not
     from replay.process import result_line
 
-    log, s = _simulated(camera, seed, tmp_path)
-    off = {n for n, e in s.errors_m.items() if e > 0.10}
-    assert off  # the layout still fools the confirmation: else this test tests nothing
+    log, s, off = _off_names(camera, seed, tmp_path)
     doubtful = s.summary["association"]["doubtful"]
     assert set(doubtful) == off
     assert all("keyframes where predicted since it was named" in why for why in doubtful.values())
     assert f"doubtful: {', '.join(sorted(off))}" in result_line(s.summary)
     # and in Rerun: the map labels them, the log says why (read back with Rerun's reader)
-    rrd = tmp_path / "run.rrd"
-    result = CliRunner().invoke(cli, ["replay", str(log), "--save", str(rrd)])
-    assert result.exit_code == 0, result.output
-    rows = _read(rrd)
-    last = [r["Points2D:labels"] for r in rows["/map/estimates"] if r.get("Points2D:labels")][-1]
+    last, rows = _replayed(log, tmp_path)
     assert {n.removesuffix(" (doubtful)") for n in last if n.endswith(" (doubtful)")} == off
     texts = [t for r in rows["/log"] for t in r.get("TextLog:text") or ()]
     assert all(any(f"{n} doubtful: seen at" in t for t in texts) for n in off)
@@ -151,9 +165,7 @@ def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
     # their landmarks seen often since end confirmed (one named late may be unconfirmed too)
     from replay.process import result_line
 
-    log, s = _simulated(camera, seed, tmp_path)
-    off = {n for n, e in s.errors_m.items() if e > 0.10}
-    assert off  # the layout still fools the confirmation: else this test tests nothing
+    log, s, off = _off_names(camera, seed, tmp_path)
     unconfirmed = s.summary["association"]["unconfirmed"]
     assert off <= set(unconfirmed) and "doubtful" not in s.summary["association"]
     assert len(unconfirmed) <= len(off) + 1 and len(s.errors_m) >= 6
@@ -165,10 +177,6 @@ def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
         named = next(m["index"] for m in moves if name in m.get("named_landmarks", ()))
         flagged = [m["index"] for m in moves if name in m.get("unconfirmed_landmarks", {})]
         assert flagged[0] == named and flagged[-1] == moves[-1]["index"]
-    rrd = tmp_path / "run.rrd"
-    result = CliRunner().invoke(cli, ["replay", str(log), "--save", str(rrd)])
-    assert result.exit_code == 0, result.output
-    rows = _read(rrd)
-    last = [r["Points2D:labels"] for r in rows["/map/estimates"] if r.get("Points2D:labels")][-1]
+    last, _ = _replayed(log, tmp_path)
     labelled = {n.removesuffix(" (unconfirmed)") for n in last if n.endswith(" (unconfirmed)")}
     assert off <= labelled <= set(unconfirmed)  # a name not in the map yet has no label
