@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from data_schemas.angles import TWO_PI, wrap_rad
+from data_schemas.angles import wrap_rad
 
 #: Candidate start points per axis of the resection's grid search.
 GRID_STEPS = 9
@@ -128,9 +128,7 @@ def _at(s: Sightings, x: NDArray[np.float64]) -> _Terms:
 def _residuals_at(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
     """:meth:`Sightings.residuals` for one parameter vector ``x`` (4,) (scalar heading terms)."""
     dx, dy, *_ = _at(s, x)
-    r = s.bearings_rad - (np.arctan2(dy, dx) - float(x[2]))
-    out: NDArray[np.float64] = r - TWO_PI * np.floor((r + math.pi) * (1.0 / TWO_PI))
-    return out
+    return wrap_rad(s.bearings_rad - (np.arctan2(dy, dx) - float(x[2])))
 
 
 def _jacobian(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
