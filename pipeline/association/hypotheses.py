@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.predict import ray_point_cov
-from pipeline.joint.geometry import intersect_rays
+from pipeline.joint.geometry import intersect_rays, solve_sym_2x2
 
 
 @dataclass(frozen=True)
@@ -139,10 +139,8 @@ def _least_squares(
     for _ in range(2):
         w = 1.0 / np.maximum((px - origins_fl[:, 0]) ** 2 + (py - origins_fl[:, 1]) ** 2, 1e-9)
         wx, wy = w * nx, w * ny
-        axx, axy, ayy = float(wx @ nx), float(wx @ ny), float(wy @ ny)
-        det = axx * ayy - axy * axy
-        if abs(det) < 1e-12 * (axx + ayy) ** 2:
+        x, y, bad = solve_sym_2x2(wx @ nx, wx @ ny, wy @ ny, wx @ rhs, wy @ rhs)
+        if bad:
             return None
-        bx, by = float(wx @ rhs), float(wy @ rhs)
-        px, py = (ayy * bx - axy * by) / det, (axx * by - axy * bx) / det
+        px, py = float(x), float(y)
     return np.array([px, py])

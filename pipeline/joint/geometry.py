@@ -291,7 +291,7 @@ class RayFix:
     rms_rad: float
 
 
-def _solve_sym(
+def solve_sym_2x2(
     axx: NDArray[np.float64],
     axy: NDArray[np.float64],
     ayy: NDArray[np.float64],
@@ -321,7 +321,7 @@ def _intersect_many(
     bad = np.zeros(ox.shape[:-1], bool)
     for _ in range(2):
         wx, wy = w * nx, w * ny
-        px, py, now = _solve_sym(
+        px, py, now = solve_sym_2x2(
             (wx * nx).sum(-1),
             (wx * ny).sum(-1),
             (wy * ny).sum(-1),
