@@ -2,8 +2,10 @@
 
 For each movement (its two keyframes, O1 and O2):
 
-1. Place the movement by resection (:func:`pipeline.joint.geometry.resect`) from the bearings of
-   landmarks whose class is their own (the reference pair included) and their map estimates.
+1. Place the movement from the bearings of landmarks whose class is their own (the reference
+   pair included) and their map estimates: chained on the end of the previous movement when
+   that one was placed (one bearing at each keyframe suffices), else by resection
+   (:func:`pipeline.joint.geometry.resect`, four bearings at least).
 2. Per shared class, predict the bearing of each landmark already named (``red#1``, ...) from
    O1 and O2, with its std from the map covariance, the placement and the bearing noise, and
    assign the class's detections (:func:`pipeline.association.assign.assign`).
@@ -201,15 +203,18 @@ class Associator:
             np.array(pts, np.float64).reshape(-1, 2), np.array(ends, np.int64), np.array(bs)
         )
         n1, n2 = int((s.end == 0).sum()), int((s.end == 1).sum())
-        if n1 < 1 or n2 < 1 or n1 + n2 < 4:
-            return f"too few bearings of mapped landmarks to place it ({n1} at O1, {n2} at O2)"
-        if self._last is not None and self._last[0] == index - 1 and n1 >= 1:
+        few = f"too few bearings of mapped landmarks to place it ({n1} at O1, {n2} at O2)"
+        if n1 < 1 or n2 < 1:
+            return few
+        if self._last is not None and self._last[0] == index - 1:
             chained = _place_chained(s, self._last[1].o2_fl, self.sigma_rad)
             if chained is not None:
                 pose = chained[0]
                 r = s.residuals(np.array([*pose.o1_fl, pose.heading_rad, math.log(pose.length_fl)]))
                 if 1.4826 * float(np.median(np.abs(r))) <= PLACEMENT_MAX_EPS * self.eps_rad:
                     return chained
+        if n1 + n2 < 4:
+            return few
         found = resect(s, guesses=[])
         if found is None:
             return "cannot be placed"

@@ -18,7 +18,8 @@ from pipeline.synthetic import simulate_bearings
 EPS = math.radians(3.0)
 ARENA_M = (1.6, 1.2)
 REFERENCE_M = ((0.55, 0.6), (1.05, 0.6))
-#: hide(movement, end, landmark) -> True drops that landmark's blob from the keyframe
+#: hide(movement, end, landmark) -> True drops that landmark's blob (a blue one or one of the
+#: reference pair) from the keyframe
 Hide = Callable[[int, int, str], bool]
 
 
@@ -95,7 +96,10 @@ def run_synthetic(
     tick = time.perf_counter()
     for obs in sim.observations:
         ends = (obs.bearings_o1_rad, obs.bearings_o2_rad)
-        unique = tuple({k: v for k, v in b.items() if k[0] == "L"} for b in ends)
+        unique = tuple(
+            {k: v for k, v in b.items() if k[0] == "L" and not (hide and hide(obs.index, e, k))}
+            for e, b in enumerate(ends)
+        )
         seen = [
             [(k, v) for k, v in b.items() if k[0] == "B" and not (hide and hide(obs.index, e, k))]
             for e, b in enumerate(ends)

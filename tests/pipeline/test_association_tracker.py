@@ -55,3 +55,19 @@ def test_a_hidden_landmark_is_not_visible_not_misassociated() -> None:
     assert "not detected (hidden or out of range)" in next(iter(hidden[0].not_visible.values()))
     assert not any(name == b2 for m, _, name, _ in run.given if m >= 8)
     assert run.correct_share() >= 0.98
+
+
+def test_a_movement_with_three_reference_bearings_is_chained_and_associated() -> None:
+    # L2 hidden at O2 in every third movement from movement 6 on: three bearings of distinct
+    # landmarks are too few for a resection, but such a movement starts where the last one
+    # ended (the robot turns in place), so the bearings at each end fix its heading and length
+    # and association goes on in it
+    def hide(move: int, end: int, name: str) -> bool:
+        return name == "L2" and end == 1 and move >= 6 and move % 3 == 0
+
+    run = run_synthetic(8, 4, hide=hide)
+    hidden = [r.index for r in run.results if r.index >= 6 and r.index % 3 == 0]
+    assert not any("too few bearings" in why for r in run.results for why in r.unresolved.values())
+    named = {m for m, *_ in run.given}
+    assert set(hidden) <= named  # blobs named in every such movement
+    assert run.correct_share() >= 0.98

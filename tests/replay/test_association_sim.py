@@ -88,14 +88,13 @@ def test_the_summary_names_and_reports(scored: Score) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("camera", ["unwrapped", "omni"])
 def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
-    # six layouts per camera, failures included: no name is ever given to the wrong landmark
+    # ten layouts per camera, failures included: no name is ever given to the wrong landmark
     # or placed off its landmark; a landmark not named within 20 movements is the one
-    # shortfall allowed (reported as unexplained blobs and open hypotheses), at most 5 of the
-    # 48. Measured with the default distance prior: 44 (unwrapped) and 45 (omni) named; without
-    # it 46 and 44. Whole runs with all 8 named swing between 3 and 4 of 6 with the prior, so
-    # the test counts landmarks, not runs.
+    # shortfall allowed (reported as unexplained blobs and open hypotheses), at most 7 of the
+    # 80. Measured: 74 (unwrapped) and 79 (omni) named. Which layout leaves one unnamed swings
+    # with small changes of the method, so the test counts landmarks over ten runs, not runs.
     named = 0
-    for seed in range(1, 7):
+    for seed in range(1, 11):
         _, s = _simulated(camera, seed, tmp_path)
         assert s.wrong_share <= 0.02, (seed, s.wrong_share)
         assert s.correct_share >= 0.98, (seed, s.correct_share)
@@ -104,19 +103,19 @@ def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
         assert sum(s.errors_m.values()) / s.n_named <= 0.03, (seed, s.errors_m)
         assert s.n_named >= 5, seed
         named += s.n_named
-    assert named >= 43, named
+    assert named >= 73, named
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 25), ("omni", 57)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 21), ("omni", 1)])
 def test_a_doubtful_name_is_retracted_for_a_landmark_the_full_catalog_kept_out(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
-    # layouts where rays of several landmarks meet and get a name (found on seeds 21-60): 93 and
-    # 79 cm (unwrapped 25) and 74 cm (omni 57) from any landmark with a stated std of about
-    # 1 cm when nothing took the name back; seen at few of their predictions they become
-    # doubtful, and once every name is given and a real landmark is confirmed, the most
-    # doubtful name goes to it: the final map has all 8 on their landmarks
+    # layouts where rays of several landmarks meet and get a name (found on seeds 1-60): 17 cm
+    # (unwrapped 21) and 21 cm (omni 1) from any landmark just before the name is taken back;
+    # seen at few of their predictions they become doubtful, and once every name is given and
+    # a real landmark is confirmed, the most doubtful name goes to it: the final map has all 8
+    # on their landmarks
     _, s = _simulated(camera, seed, tmp_path)
     retracted = {
         k.removesuffix(" retracted"): why
@@ -132,13 +131,14 @@ def test_a_doubtful_name_is_retracted_for_a_landmark_the_full_catalog_kept_out(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 42), ("omni", 36)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 84), ("omni", 36)])
 def test_names_off_their_landmark_are_reported_doubtful(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
-    # layouts where a name given to rays of several landmarks stays (22 cm off with a stated
-    # std of 3 cm, unwrapped 42; 43 cm, omni 36): seen at few of the keyframes where the map
-    # predicts it, it is reported as doubtful in the summary, its result line and Rerun; the
+    # layouts where a name given to rays of several landmarks stays (23 cm off, unwrapped 84,
+    # the one unwrapped case on seeds 1-100 besides one 105 cm off; 30 cm, omni 36): seen at
+    # few of the keyframes where the map predicts it, it is reported as doubtful in the
+    # summary, its result line and Rerun; the
     # names on real landmarks are not
     from replay.process import result_line
 
@@ -155,13 +155,13 @@ def test_names_off_their_landmark_are_reported_doubtful(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 66), ("omni", 48)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 66), ("omni", 67)])
 def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
     # layouts where a wrong name is seen too few times after its naming for the doubt rule to
-    # judge it (unwrapped 66: named with movement 17, 24 cm off; omni 48: 61 cm off, seen at 3
-    # keyframes since): it ends unconfirmed in the summary, its result line and Rerun; names on
+    # judge it (unwrapped 66: named with movement 17, 24 cm off; omni 67: 57 cm off): it ends
+    # unconfirmed in the summary, its result line and Rerun; names on
     # their landmarks seen often since end confirmed (one named late may be unconfirmed too)
     from replay.process import result_line
 
