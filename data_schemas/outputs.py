@@ -103,15 +103,27 @@ class OutputGuard:
         """A temporary path beside ``path``, renamed onto it when the block ends without error.
 
         On error (or interruption) the temporary file is removed and ``path`` is untouched.
+
+        Raises
+        ------
+        OutputError
+            The temporary file cannot be made in the folder, or cannot be renamed onto
+            ``path``.
         """
         out = Path(path)
-        fd, tmp = tempfile.mkstemp(
-            prefix=f".{out.name[:100]}.", suffix=f".part{out.suffix[:20]}", dir=_folder(out)
-        )
+        try:
+            fd, tmp = tempfile.mkstemp(
+                prefix=f".{out.name[:100]}.", suffix=f".part{out.suffix[:20]}", dir=_folder(out)
+            )
+        except OSError as exc:
+            raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from None
         os.close(fd)
         try:
             yield Path(tmp)
-            os.replace(tmp, out)
+            try:
+                os.replace(tmp, out)
+            except OSError as exc:
+                raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from None
         except BaseException:
             with contextlib.suppress(OSError):
                 os.unlink(tmp)

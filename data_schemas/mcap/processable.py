@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 from collections.abc import Collection, Container, Iterator
 from pathlib import Path
 from typing import IO
@@ -102,8 +103,8 @@ def _summary(file: IO[bytes]) -> Summary | None:
     try:
         file.seek(0)
         return make_reader(file).get_summary()
-    except (McapError, ValueError, KeyError, UnicodeDecodeError, EOFError):
-        return None
+    except (McapError, ValueError, KeyError, UnicodeDecodeError, EOFError, struct.error, OSError):
+        return None  # too short for the magic (struct), or for the footer (a seek before 0)
 
 
 class ProcessableLog(Closing):

@@ -51,6 +51,14 @@ def _bad(tmp_path: Path, kind: str) -> Path:
         p = tmp_path / "notes.mcap"
         p.write_text("hello, not a log\n")
         return p
+    if kind == "shorter-than-magic":
+        p = tmp_path / "tiny.mcap"
+        p.write_bytes(b"\x89MCA")
+        return p
+    if kind == "magic-only":  # a recording killed right after it opened the file
+        p = tmp_path / "started.mcap"
+        p.write_bytes(b"\x89MCAP0\r\n")
+        return p
     if kind == "unfinished":
         return write_log(tmp_path / "cut.mcap", finish=False)
     if kind == "no-metadata":
@@ -68,6 +76,8 @@ def _bad(tmp_path: Path, kind: str) -> Path:
 
 EXPECTED = {
     "not-mcap": "is not an MCAP file",
+    "shorter-than-magic": "is not an MCAP file",
+    "magic-only": "0 messages are readable; run `bslam recover",
     "unfinished": "bslam recover",
     "no-metadata": "no 'bslam.session'",
     "no-calibration": "no camera calibration",

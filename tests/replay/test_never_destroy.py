@@ -119,6 +119,23 @@ def test_unwritable_folder_is_one_line(log: Path, tmp_path: Path) -> None:
         locked.chmod(0o755)
 
 
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+@pytest.mark.parametrize(
+    ("command", "option", "name"),
+    [
+        ("process", "--out", "d.mcap"),
+        ("process", "--summary", "s.json"),
+        ("replay", "--save", "r.rrd"),
+    ],
+)
+def test_a_folder_that_refuses_new_files_is_one_line(
+    log: Path, command: str, option: str, name: str
+) -> None:
+    # /proc exists and is a folder, but no one (root included) can create a file in it: the
+    # temporary file beside the output cannot be made
+    _one_line_error(_run(command, log, option, Path("/proc") / name), f"cannot write /proc/{name}")
+
+
 def test_interrupted_write_leaves_the_old_file_whole(tmp_path: Path) -> None:
     out = tmp_path / "s.json"
     out.write_text("old")
