@@ -235,6 +235,10 @@ def fuse(
 
 #: Default proposal draws per output particle of :func:`fuse_likelihood`.
 PROPOSALS_PER_PARTICLE = 16
+#: The defensive mixture draws at most this many points: its two KDE densities (n_l kernels
+#: each) at the draws then cost at most ``DEFENSIVE_DRAWS x n_l``, linear in n_l. The paper's
+#: n_l = 300 and below draw ``PROPOSALS_PER_PARTICLE n_l``, as before.
+DEFENSIVE_DRAWS = PROPOSALS_PER_PARTICLE * 300
 
 
 class LikelihoodUpdate(NamedTuple):
@@ -243,7 +247,7 @@ class LikelihoodUpdate(NamedTuple):
     Attributes
     ----------
     points_fl : ndarray (k, 2)
-        Proposals (FL): ``m``, or ``2 m`` when the defensive draws were added.
+        Proposals (FL): ``m``, or ``m + m_d`` when the defensive draws were added.
     weights : ndarray (k,)
         Importance weights (not normalised).
     defensive : bool
@@ -297,12 +301,13 @@ def fuse_likelihood(
 
     Plain proposal: the KDE ``q^`` of the belief, weights ``L_t``. When its effective sample
     size ``(sum w)^2 / sum w^2`` is below ``n_l`` (e.g. a wide belief, a narrow likelihood in
-    its tail) and ``new_fl`` is given, ``m`` more draws come from the defensive mixture: half
-    from ``q^`` (the belief resampled to ``n_l`` equal kernels, so its density is cheap), half
-    from the KDE ``p^`` of this movement's own set ``p_t``, which covers where ``L_t > 0``;
+    its tail) and ``new_fl`` is given, ``m_d = min(m, DEFENSIVE_DRAWS)`` more draws come from
+    the defensive mixture: half from ``q^`` (the belief resampled to ``n_l`` equal kernels, so
+    its density is cheap), half from the KDE ``p^`` of this movement's own set ``p_t``, which
+    covers where ``L_t > 0``;
     weights ``q^(x) L_t(x) / (q^(x) / 2 + p^(x) / 2)`` in the log domain (the target stays
     ``q^ L_t``: the prior of ``p_t`` is not counted). Both weighted sets are returned
-    together (``2 m`` points), each scaled to total its effective sample size; only the
+    together (``m + m_d`` points), each scaled to total its effective sample size; only the
     defensive one if the plain one has no positive weight, only the plain one if the
     defensive one has none.
 
@@ -336,20 +341,21 @@ def fuse_likelihood(
         kept = np.ones(prev_fl.shape[0]) if prev_weights is None else prev_weights
         kernels = prev_fl[systematic_resample(kept, n_l, rng)]
     q_hat, p_hat = Kde.fit(kernels, h), Kde.fit(new_fl, h)
-    xd = _mixture_sample(q_hat, p_hat, m, rng)
+    m_d = min(m, DEFENSIVE_DRAWS)
+    xd = _mixture_sample(q_hat, p_hat, m_d, rng)
     lik = likelihood(xd)
     if not float(lik.sum()) > 0.0:
         return plain
     # the two densities only where L_t > 0 (elsewhere the weight is 0 whatever they are): the
-    # costly part, m x n_l kernel terms each, shrinks to the draws the likelihood keeps
+    # costly part, m_d x n_l kernel terms each, shrinks to the draws the likelihood keeps
     hit = np.flatnonzero(lik)
-    lq, _, log_mix = _mixture_logpdf(q_hat, p_hat, xd[_padded(hit)], m)
+    lq, _, log_mix = _mixture_logpdf(q_hat, p_hat, xd[_padded(hit)], m_d)
     lq, log_mix = lq[: hit.size], log_mix[: hit.size]
     log_w = np.log(lik[hit])
     log_w += lq
     log_w -= log_mix
     log_w -= log_w.max()
-    wd = np.zeros(m)
+    wd = np.zeros(m_d)
     wd[hit] = np.exp(log_w)
     if plain is None:
         return LikelihoodUpdate(xd, wd, defensive=True)

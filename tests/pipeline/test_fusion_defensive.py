@@ -8,7 +8,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from pipeline.fusion import Kde, LikelihoodUpdate, _mixture_draws, fuse_likelihood
+from pipeline.fusion import DEFENSIVE_DRAWS, Kde, LikelihoodUpdate, _mixture_draws, fuse_likelihood
 
 N_L = 300
 SD_L = 0.05  # the likelihood's width (FL units)
@@ -50,22 +50,35 @@ def _mean_and_error(res: LikelihoodUpdate) -> tuple[np.ndarray, np.ndarray]:
 
 # the likelihood 4.2 sd out in the belief's tail (the belief's proposals miss it: None) and
 # 2.5 sd out (a few hit it: low effective sample size; both draw sets are pooled)
-@pytest.mark.parametrize(("offset", "seed"), [(4.2, 0), (4.2, 1), (2.5, 2), (2.5, 3)])
-def test_defensive_proposal_recovers_the_product(offset: float, seed: int) -> None:
+# and with 4 times the particles, where the mixture makes DEFENSIVE_DRAWS draws, not 16 n_l
+@pytest.mark.parametrize(
+    ("offset", "seed", "n_l"),
+    [
+        (4.2, 0, N_L),
+        (4.2, 1, N_L),
+        (2.5, 2, N_L),
+        (2.5, 3, N_L),
+        (4.2, 4, 4 * N_L),
+        (4.2, 5, 4 * N_L),
+    ],
+)
+def test_defensive_proposal_recovers_the_product(offset: float, seed: int, n_l: int) -> None:
     rng = np.random.default_rng(seed)
-    prev = rng.normal(0.0, 1.0, (N_L, 2))  # a wide first belief
+    prev = rng.normal(0.0, 1.0, (n_l, 2))  # a wide first belief
     centre = np.array([offset, 0.3])
     lik = _likelihood(centre)
     # this movement's own set: where its bearings put the landmark, off the likelihood's peak
     # (it carries that movement's range prior), wider than the likelihood
-    new_fl = rng.normal(centre + np.array([0.03, -0.02]), 2 * SD_L, (N_L, 2))
+    new_fl = rng.normal(centre + np.array([0.03, -0.02]), 2 * SD_L, (n_l, 2))
 
-    plain = fuse_likelihood(prev, lik, N_L, rng)
+    plain = fuse_likelihood(prev, lik, n_l, rng)
     assert plain is None or _ess(plain.weights) < 10
-    res = fuse_likelihood(prev, lik, N_L, rng, new_fl=new_fl)
+    res = fuse_likelihood(prev, lik, n_l, rng, new_fl=new_fl)
     assert res is not None and res.defensive
-    assert res.points_fl.shape[0] in (16 * N_L, 32 * N_L)
-    assert _ess(res.weights) > N_L
+    m_d = min(16 * n_l, DEFENSIVE_DRAWS)
+    assert res.points_fl.shape[0] in (m_d, 16 * n_l + m_d)
+    # as many effective draws as at the paper's n_l: the defensive draws stop at DEFENSIVE_DRAWS
+    assert _ess(res.weights) > min(n_l, N_L)
 
     want = _grid_mean(prev, centre)
     got, se = _mean_and_error(res)
