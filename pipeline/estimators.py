@@ -15,6 +15,7 @@ import numpy as np
 
 from data_schemas.errors import EstimationError
 from pipeline.estimate import LandmarkEstimate
+from pipeline.fusion import PAPER_N_L
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
 
@@ -52,7 +53,7 @@ def make_estimator(
     rng: np.random.Generator,
     prior: PriorName = "impartial",
     n_r: int = 50,
-    n_l: int = 300,
+    n_l: int = PAPER_N_L,
     turn_prior_sigma_rad: float | None = None,
     distance_prior_rel: float | None = None,
 ) -> Estimator:

@@ -235,10 +235,12 @@ def fuse(
 
 #: Default proposal draws per output particle of :func:`fuse_likelihood`.
 PROPOSALS_PER_PARTICLE = 16
+#: Particles per landmark in FL: the paper's n_l, the default everywhere.
+PAPER_N_L = 300
 #: The defensive mixture draws at most this many points: its two KDE densities (n_l kernels
 #: each) at the draws then cost at most ``DEFENSIVE_DRAWS x n_l``, linear in n_l. The paper's
 #: n_l = 300 and below draw ``PROPOSALS_PER_PARTICLE n_l``, as before.
-DEFENSIVE_DRAWS = PROPOSALS_PER_PARTICLE * 300
+DEFENSIVE_DRAWS = PROPOSALS_PER_PARTICLE * PAPER_N_L
 
 
 class LikelihoodUpdate(NamedTuple):

@@ -35,7 +35,7 @@ from pipeline.cones import (
 )
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import FrameChange, change_frame
-from pipeline.fusion import LikelihoodUpdate, fuse, fuse_likelihood
+from pipeline.fusion import PAPER_N_L, LikelihoodUpdate, fuse, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
 from pipeline.likelihood import N_FRAMES, FrameLikelihood
 from pipeline.priors import R_MAX_FR, R_MIN_FR, ImpartialPrior, PriorName, make_prior
@@ -159,7 +159,7 @@ class BearingSlam:
         vision_error_rad: float,
         prior: PriorName = "impartial",
         n_r: int = 50,
-        n_l: int = 300,
+        n_l: int = PAPER_N_L,
         frame_change: FrameChange = "sampled",
         rng: np.random.Generator,
         r_min: float = R_MIN_FR,

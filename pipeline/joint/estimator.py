@@ -29,6 +29,7 @@ from data_schemas.errors import EstimationError
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import to_fl
+from pipeline.fusion import PAPER_N_L
 from pipeline.joint import graph as g
 from pipeline.joint.geometry import (
     MovementPose,
@@ -140,7 +141,7 @@ class JointSlam:
         rng: np.random.Generator,
         prior: PriorName = "impartial",
         n_r: int = 50,
-        n_l: int = 300,
+        n_l: int = PAPER_N_L,
         robust: bool = True,
         turn_prior_sigma_rad: float | None = None,
         distance_prior_rel: float | None = None,
