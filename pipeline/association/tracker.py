@@ -464,8 +464,10 @@ class Associator:
     ) -> list[list[int]]:
         """Add rays to hypotheses from free detections; count misses; drop stale ones.
 
-        A hypothesis whose gate holds several detections branches: one copy per detection,
-        each refitted (the rays must still meet), so rivals do not hold each other back."""
+        A hypothesis whose gate holds one detection gains its ray if the rays still meet (else
+        it is neither seen nor missed); one whose gate holds several waits for a clearer view;
+        one whose gate holds none counts a miss. Detections in any gate are not free for new
+        hypotheses."""
         hyps = [h for h in self.hypotheses[label] if index - h.born <= MAX_AGE]
         used: list[set[int]] = [set(), set()]
         for end in (0, 1):
