@@ -235,7 +235,7 @@ def fuse(
 
 #: Default proposal draws per output particle of :func:`fuse_likelihood`.
 PROPOSALS_PER_PARTICLE = 16
-#: Particles per landmark in FL: the paper's n_l, the default everywhere.
+#: Particles per landmark in FL: the paper's n_l, the default of the filter and the estimators.
 PAPER_N_L = 300
 #: The defensive mixture draws at most this many points: its two KDE densities (n_l kernels
 #: each) at the draws then cost at most ``DEFENSIVE_DRAWS x n_l``, linear in n_l. The paper's
