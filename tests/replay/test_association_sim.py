@@ -138,8 +138,7 @@ def test_names_off_their_landmark_are_reported_doubtful(
     # layouts where a name given to rays of several landmarks stays (23 cm off, unwrapped 84,
     # the one unwrapped case on seeds 1-100 besides one 105 cm off; 30 cm, omni 36): seen at
     # few of the keyframes where the map predicts it, it is reported as doubtful in the
-    # summary, its result line and Rerun; the
-    # names on real landmarks are not
+    # summary, its result line and Rerun; the names on real landmarks are not
     from replay.process import result_line
 
     log, s, off = _off_names(camera, seed, tmp_path)
@@ -161,8 +160,8 @@ def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
 ) -> None:
     # layouts where a wrong name is seen too few times after its naming for the doubt rule to
     # judge it (unwrapped 66: named with movement 17, 24 cm off; omni 67: 57 cm off): it ends
-    # unconfirmed in the summary, its result line and Rerun; names on
-    # their landmarks seen often since end confirmed (one named late may be unconfirmed too)
+    # unconfirmed in the summary, its result line and Rerun; names on their landmarks seen
+    # often since end confirmed (one named late may be unconfirmed too)
     from replay.process import result_line
 
     log, s, off = _off_names(camera, seed, tmp_path)
