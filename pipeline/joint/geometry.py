@@ -125,15 +125,20 @@ def _at(s: Sightings, x: NDArray[np.float64]) -> _Terms:
     return dx, dy, d, c, sn
 
 
-def _residuals_at(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """:meth:`Sightings.residuals` for one parameter vector ``x`` (4,) (scalar heading terms)."""
-    dx, dy, *_ = _at(s, x)
+def _wrapped_residuals(s: Sightings, terms: _Terms, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:meth:`Sightings.residuals` at parameters ``x`` (4,) from their :func:`_at` terms."""
+    dx, dy, *_ = terms
     return wrap_rad(s.bearings_rad - (np.arctan2(dy, dx) - float(x[2])))
 
 
-def _jacobian(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
-    """d(predicted bearing)/d(x, y, h, log d) (k, 4) at parameters ``x`` (4,)."""
-    dx, dy, d, c, sn = _at(s, x)
+def _residuals_at(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:meth:`Sightings.residuals` for one parameter vector ``x`` (4,) (scalar heading terms)."""
+    return _wrapped_residuals(s, _at(s, x), x)
+
+
+def _jacobian_of(terms: _Terms) -> NDArray[np.float64]:
+    """d(predicted bearing)/d(x, y, h, log d) (k, 4) from the :func:`_at` terms."""
+    dx, dy, d, c, sn = terms
     r2 = np.maximum(dx * dx + dy * dy, 1e-300)
     jac = np.empty((dx.size, 4))
     jac[:, 0] = da_dox = dy / r2  # d atan2(dy, dx) / d(observer x)
@@ -143,25 +148,35 @@ def _jacobian(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
     return jac
 
 
+def _jacobian(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """d(predicted bearing)/d(x, y, h, log d) (k, 4) at parameters ``x`` (4,)."""
+    return _jacobian_of(_at(s, x))
+
+
 def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[np.float64]:
     """Levenberg-Marquardt on the 4 movement parameters."""
     x, lam = x0.copy(), 1e-3
-    r = _residuals_at(s, x)
+    terms = _at(s, x)
+    r = _wrapped_residuals(s, terms, x)
     cost = float(r @ r)
     diag = np.arange(4)
+    normal: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     for _ in range(iters):
-        jac = _jacobian(s, x)  # residual = measured - predicted: d residual = -jac
-        a = jac.T @ jac
+        if normal is None:  # the Jacobian changes only when a step is taken
+            jac = _jacobian_of(terms)  # residual = measured - predicted: d residual = -jac
+            normal = jac.T @ jac, jac.T @ r
+        a = normal[0].copy()
         a[diag, diag] += lam * (a[diag, diag] + 1e-12)
         try:
-            delta = np.linalg.solve(a, jac.T @ r)
+            delta = np.linalg.solve(a, normal[1])
         except np.linalg.LinAlgError:
             break
         cand = x + delta
-        rc = _residuals_at(s, cand)
+        cand_terms = _at(s, cand)
+        rc = _wrapped_residuals(s, cand_terms, cand)
         c = float(rc @ rc)
         if c < cost:
-            x, r, lam = cand, rc, lam * 0.3
+            x, r, terms, lam, normal = cand, rc, cand_terms, lam * 0.3, None
             done = cost - c < 1e-8 * cost
             cost = c
             if done:
