@@ -1,7 +1,7 @@
 """What became of a named landmark's predicted sightings since it was named, and when that is
 too little to trust the name.
 
-A landmark of a shared class is named from a few rays (three lines of sight over two
+A landmark of a shared class is named from a few rays (four lines of sight over two
 movements). Rays of several landmarks can meet by chance, and such a name fits its own rays as
 well as a real landmark does, so its residuals do not give it away. What does: from the
 keyframes that come after, a real landmark is mostly seen where the map predicts it, a point
@@ -31,7 +31,7 @@ DOUBT_SEEN_SHARE = 1.0 / 3.0
 #: or predicted at this many and seen at none.
 DOUBT_NEVER_SEEN = 2
 #: A name not doubtful is confirmed once seen at this many keyframes since it was named (two
-#: movements' worth, beyond the three lines of sight that named it).
+#: movements' worth, beyond the lines of sight or the keyframes that named it).
 CONFIRM_MIN_SEEN = 4
 
 

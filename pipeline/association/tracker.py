@@ -15,13 +15,16 @@ For each movement (its two keyframes, O1 and O2):
    one from each keyframe, whose rays meet ahead of both start new hypotheses (every pairing
    the two cones allow). Rays kept from earlier movements are placed anew on the estimator's
    current trajectory.
-4. A hypothesis seen along three distinct lines of sight over two movements, every ray within
+4. A hypothesis seen along four distinct lines of sight over two movements, every ray within
    eps of its point, is confirmed unless a rival sharing one of its rays still disputes it: it
    is named ``label#k`` (k in order of confirmation) while the class has fewer named landmarks
    than the catalog has; hypotheses sharing a ray with it are dropped. A hypothesis whose
    every ray is a bearing of a named landmark is that landmark seen again (dropped). A
    hypothesis that misses :data:`MAX_MISSES` keyframes, or is not confirmed within
    :data:`MAX_AGE` movements, is dropped.
+   The detections no name took are kept for :data:`DISCOVER_WINDOW` movements; when the rays
+   of many of them, from many keyframes, pass near one point (a landmark whose rays the
+   hypotheses kept disputing or swallowing), that point is named too.
 
 5. What became of each named landmark's predictions since it was named (seen, missed,
    contested, too uncertain) is counted (:mod:`pipeline.association.support`); a name seen too
@@ -45,7 +48,14 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.assign import GATE_CHI2, Assignment, assign
-from pipeline.association.hypotheses import Hypothesis, Ray, cannot_meet, fit
+from pipeline.association.hypotheses import (
+    FIT_TOL_EPS,
+    MIN_PARALLAX_EPS,
+    Hypothesis,
+    Ray,
+    cannot_meet,
+    fit,
+)
 from pipeline.association.predict import predict_bearings
 from pipeline.association.support import Outcome, Support
 from pipeline.crb import truncated_gaussian_std
@@ -66,9 +76,19 @@ MOVED_FL = 1e-3
 MAX_HYPOTHESES = 200
 #: Distinct lines of sight (through its point, differing by more than :data:`DISTINCT_EPS`
 #: eps) and movements a hypothesis needs to be confirmed.
-CONFIRM_POSITIONS = 3
+CONFIRM_POSITIONS = 4
 CONFIRM_MOVEMENTS = 2
 DISTINCT_EPS = 2.0
+#: A landmark the hypotheses did not name is named from the unnamed detections of the last
+#: DISCOVER_WINDOW movements when their rays pass within FIT_TOL_EPS eps of one point from
+#: DISCOVER_KEYFRAMES keyframes, along DISCOVER_LINES distinct lines of sight over
+#: DISCOVER_MOVEMENTS movements, and the point's class was detected at DISCOVER_SEEN_SHARE of
+#: the keyframes since the first of them where it could be predicted.
+DISCOVER_WINDOW = 10
+DISCOVER_KEYFRAMES = 8
+DISCOVER_LINES = 4
+DISCOVER_MOVEMENTS = 3
+DISCOVER_SEEN_SHARE = 0.8
 #: A named landmark whose predicted bearing is less certain than this (std, in eps) is too
 #: poorly placed to gate detections: reported, left out of the assignment.
 MAX_PRED_STD_EPS = 2.0
@@ -175,6 +195,12 @@ class Associator:
         self.support: dict[str, Support] = {}
         self._last: tuple[int, MovementPose] | None = None
         self._dets: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+        #: every detection of each shared class at each keyframe (movement, end) so far
+        self._seen_at: dict[tuple[int, int], dict[str, NDArray[np.float64]]] = {}
+        #: per class, detections no name took: (movement, end, detection, bearing_rad)
+        self._unnamed: dict[str, list[tuple[int, int, int, float]]] = {c: [] for c in classes}
+        #: the estimator's placement of each movement (index -> pose), as of the last one
+        self._trajectory: dict[int, MovementPose] = {}
         self._free: dict[str, tuple[list[int], list[int]]] = {}
         self._distinct = DISTINCT_EPS * self.eps_rad
 
@@ -257,6 +283,8 @@ class Associator:
         self._free = {c: ([], []) for c in self.capacity}
         for c, (d1, d2) in self._dets.items():
             out.names[c] = ([None] * d1.size, [None] * d2.size)
+        for end in (0, 1):
+            self._seen_at[index, end] = {c: d[end] for c, d in self._dets.items()}
         placed = self._place(index, unique, mapped)
         if isinstance(placed, str):
             for c, (d1, d2) in self._dets.items():
@@ -337,6 +365,10 @@ class Associator:
             return
         if trajectory:
             self._replace(trajectory)
+            self._trajectory = dict(trajectory)
+        self._trajectory[out.index] = pose
+        for key in [k for k in self._seen_at if k[0] <= out.index - DISCOVER_WINDOW]:
+            del self._seen_at[key]  # older than any ray the search keeps
         self._last = (out.index, pose)
         origins = (pose.o1_fl, pose.o2_fl)
         index = out.index
@@ -359,6 +391,8 @@ class Associator:
             free = self._grow(c, dets, free, origins, pose.heading_rad, index)
             self._birth(c, dets, free, origins, pose.heading_rad, index)
             self._confirm(c, out, mapped)
+            self._keep_unnamed(c, out)
+            self._discover(c, out, mapped)
             left = [f"{len(f)} at {w}" for f, w in zip(free, ("O1", "O2"), strict=True) if f]
             if left:
                 out.unresolved.setdefault(
@@ -553,30 +587,125 @@ class Associator:
             if h.keys & taken or rivals:
                 continue  # its pairing is still disputed: wait for later movements
             taken |= h.keys
-            if len(self.named[label]) < self.capacity[label]:
-                name = slot_name(label, len(self.named[label]) + 1)
-                self.named[label].append(name)
-            else:
-                weakest = self._most_doubtful(label)
-                if weakest is None:
-                    out.unresolved[f"{label} beyond catalog"] = (
-                        f"a landmark of {label} fits {len(h.rays)} keyframes at "
-                        f"({h.point_fl[0]:.2f}, {h.point_fl[1]:.2f}) FL but the catalog has "
-                        f"{self.capacity[label]} of {label}, all named; not mapped"
-                    )
-                    continue
-                name = weakest
-                self._retract(label, name, h, lines[id(h)], out)
-            self.unmapped[name] = h
-            self.support[name] = Support(out.index)
-            if (young := self.support[name].unconfirmed()) is not None:
-                out.unconfirmed[name] = young
-            out.confirmed.append(name)
-            out.history[name] = [(r.movement, r.end, r.bearing_rad) for r in h.rays]
-            for r in h.rays:
-                if r.movement == out.index:
-                    out.names[label][r.end][r.detection] = name
+            self._give_name(label, h, lines[id(h)], out)
         self.hypotheses[label] = [h for h in self.hypotheses[label] if not h.keys & taken]
+
+    def _give_name(self, label: str, h: Hypothesis, lines: int, out: MovementAssociation) -> bool:
+        """Name ``h`` (seen along ``lines`` lines of sight): the next free name of ``label``, or
+        the most doubtful one when the catalog is full (False: none is doubtful; reported)."""
+        if len(self.named[label]) < self.capacity[label]:
+            name = slot_name(label, len(self.named[label]) + 1)
+            self.named[label].append(name)
+        else:
+            weakest = self._most_doubtful(label)
+            if weakest is None:
+                out.unresolved[f"{label} beyond catalog"] = (
+                    f"a landmark of {label} fits {len(h.rays)} keyframes at "
+                    f"({h.point_fl[0]:.2f}, {h.point_fl[1]:.2f}) FL but the catalog has "
+                    f"{self.capacity[label]} of {label}, all named; not mapped"
+                )
+                return False
+            name = weakest
+            self._retract(label, name, h, lines, out)
+        self.unmapped[name] = h
+        self.support[name] = Support(out.index)
+        if (young := self.support[name].unconfirmed()) is not None:
+            out.unconfirmed[name] = young
+        out.confirmed.append(name)
+        out.history[name] = [(r.movement, r.end, r.bearing_rad) for r in h.rays]
+        for r in h.rays:
+            if r.movement == out.index:
+                out.names[label][r.end][r.detection] = name
+        return True
+
+    def _keep_unnamed(self, label: str, out: MovementAssociation) -> None:
+        """Keep this movement's detections of ``label`` that no name took."""
+        dets = self._dets[label]
+        for end in (0, 1):
+            for j, name in enumerate(out.names[label][end]):
+                if name is None:
+                    self._unnamed[label].append((out.index, end, j, float(dets[end][j])))
+
+    def _discover(
+        self, label: str, out: MovementAssociation, mapped: Mapping[str, LandmarkEstimate]
+    ) -> None:
+        """Name a landmark of ``label`` that the hypotheses did not (they kept disputing or
+        swallowing its detections) but that the unnamed detections of the last
+        :data:`DISCOVER_WINDOW` movements point at. The candidate points are the crossings of
+        this movement's rays (:func:`_crossings`); the one most keyframes' rays pass near is
+        fitted to them and named if it meets the ``DISCOVER_*`` thresholds and is not mostly
+        a named landmark seen again. With the catalog full it takes the most doubtful name."""
+        first = out.index - DISCOVER_WINDOW
+        kept = [u for u in self._unnamed[label] if u[0] > first]
+        self._unnamed[label] = kept
+        full = len(self.named[label]) >= self.capacity[label]
+        if full and self._most_doubtful(label) is None:
+            return
+        rays = [
+            _on(Ray(m, e, j, b, (0.0, 0.0), 0.0), self._trajectory[m])
+            for m, e, j, b in kept
+            if m in self._trajectory
+        ]
+        if len(rays) < DISCOVER_KEYFRAMES:
+            return
+        rs = _RaySet(rays)
+        points = _crossings(rs, out.index, MIN_PARALLAX_EPS * self.eps_rad)
+        if points.shape[0] == 0:
+            return
+        tol = FIT_TOL_EPS * self.eps_rad
+        err = rs.errors(points)
+        best = int(np.argmax(rs.keyframes_within(err, tol)))
+        h: Hypothesis | None = None
+        point = points[best]
+        for _ in range(2):  # the crossing, then the point its rays fit, gathers the rays
+            found = rs.nearest_per_keyframe(rs.errors(point[None, :])[0], tol)
+            if len(found) < DISCOVER_KEYFRAMES:
+                return
+            h = fit(label, found, self.eps_rad, self.sigma_rad, point)
+            if h is None:
+                return
+            point = h.point_fl
+        assert h is not None
+        lines = _lines_of_sight(h, self._distinct)
+        if lines < DISCOVER_LINES or len(h.movements) < DISCOVER_MOVEMENTS:
+            return
+        for _, e in self._known(label, mapped):
+            if 2 * sum(self._ray_fits(r, e) for r in h.rays) > len(h.rays):
+                return  # mostly bearings of a named landmark: that one, seen again
+        seen, predicted = self._predicted_seen(h, min(r.movement for r in h.rays))
+        if seen < DISCOVER_SEEN_SHARE * predicted:
+            return
+        if self._give_name(label, h, lines, out):
+            self._unnamed[label] = [u for u in kept if u[:3] not in h.keys]
+            self.hypotheses[label] = [o for o in self.hypotheses[label] if not o.keys & h.keys]
+
+    def _predicted_seen(self, h: Hypothesis, since: int) -> tuple[int, int]:
+        """At the placed keyframes from movement ``since`` on where the bearing of ``h``'s
+        point is sharp enough to gate: how many held a detection of its class (named or not)
+        in the gate, and how many there were."""
+        keys = [(k, end) for (k, end) in self._seen_at if k >= since and k in self._trajectory]
+        if not keys:
+            return 0, 0
+        poses = [self._trajectory[k] for k, _ in keys]
+        origins = np.array(
+            [p.o1_fl if e == 0 else p.o2_fl for p, (_, e) in zip(poses, keys, strict=True)]
+        )
+        n = len(keys)
+        pred, std = predict_bearings(
+            origins,
+            np.array([p.heading_rad for p in poses]),
+            np.broadcast_to(h.point_fl, (n, 2)),
+            np.broadcast_to(h.cov_fl, (n, 2, 2)),
+            bearing_var_rad=2.0 * self.sigma_rad**2,
+        )
+        seen = predicted = 0
+        for i, key in enumerate(keys):
+            if std[i] > MAX_PRED_STD_EPS * self.eps_rad:
+                continue
+            predicted += 1
+            det = self._seen_at[key].get(h.label, np.zeros(0))
+            seen += bool(np.any((wrap_rad(det - pred[i]) / std[i]) ** 2 <= GATE_CHI2))
+        return seen, predicted
 
     def _most_doubtful(self, label: str) -> str | None:
         """The named landmark of ``label`` seen at the smallest share of its predictions among
@@ -696,6 +825,61 @@ def _place_chained(
         return None
     pos_std = sigma_rad / math.sqrt(den)
     return MovementPose(np.asarray(o1_fl, np.float64), heading, t), pos_std
+
+
+class _RaySet:
+    """Rays sorted by keyframe, as arrays (origins (r, 2), directions (r,), keyframe ids (r,))."""
+
+    def __init__(self, rays: Sequence[Ray]) -> None:
+        frames = np.array([2 * r.movement + r.end for r in rays], np.int64)
+        order = np.argsort(frames, kind="stable")
+        self.rays = [rays[int(i)] for i in order]
+        self.frames = frames[order]
+        self.origins_fl = np.array([r.origin_fl for r in self.rays], np.float64).reshape(-1, 2)
+        self.dirs_rad = np.array([r.direction_rad for r in self.rays], np.float64)
+        self.units = np.column_stack((np.cos(self.dirs_rad), np.sin(self.dirs_rad)))
+        self.starts = np.flatnonzero(np.r_[True, self.frames[1:] != self.frames[:-1]])
+
+    def errors(self, points_fl: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Angle (c, r) between each ray and the direction from its origin to each point (c, 2);
+        inf for a point behind the ray."""
+        d = points_fl[:, None, :] - self.origins_fl[None, :, :]
+        err = np.abs(wrap_rad(np.arctan2(d[..., 1], d[..., 0]) - self.dirs_rad[None, :]))
+        ahead = (d * self.units[None, :, :]).sum(axis=2) > 0.0
+        out: NDArray[np.float64] = np.where(ahead, err, np.inf)
+        return out
+
+    def keyframes_within(self, err: NDArray[np.float64], tol_rad: float) -> NDArray[np.int64]:
+        """Per point (row of ``err`` (c, r)), the keyframes with a ray within ``tol_rad``."""
+        near = (err <= tol_rad).astype(np.int8)
+        out: NDArray[np.int64] = np.maximum.reduceat(near, self.starts, axis=1).sum(axis=1)
+        return out
+
+    def nearest_per_keyframe(self, err: NDArray[np.float64], tol_rad: float) -> list[Ray]:
+        """For one point (``err`` (r,)), each keyframe's ray nearest it, if within ``tol_rad``."""
+        out = []
+        for lo, hi in zip(self.starts, [*self.starts[1:], err.size], strict=True):
+            k = lo + int(np.argmin(err[lo:hi]))
+            if err[k] <= tol_rad:
+                out.append(self.rays[k])
+        return out
+
+
+def _crossings(rs: _RaySet, index: int, min_parallax_rad: float) -> NDArray[np.float64]:
+    """Where each ray at O1 of movement ``index`` crosses each ray at its O2, ahead of both
+    with at least ``min_parallax_rad`` between them: points (c, 2) FL."""
+    a = np.flatnonzero(rs.frames == 2 * index)
+    b = np.flatnonzero(rs.frames == 2 * index + 1)
+    ua, ub = rs.units[a][:, None, :], rs.units[b][None, :, :]
+    cross = ua[..., 0] * ub[..., 1] - ua[..., 1] * ub[..., 0]
+    d = rs.origins_fl[b][None, :, :] - rs.origins_fl[a][:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1 = (d[..., 0] * ub[..., 1] - d[..., 1] * ub[..., 0]) / cross
+        t2 = (d[..., 0] * ua[..., 1] - d[..., 1] * ua[..., 0]) / cross
+    parallax = np.abs(wrap_rad(rs.dirs_rad[a][:, None] - rs.dirs_rad[b][None, :]))
+    ia, ib = np.nonzero((t1 > 0.0) & (t2 > 0.0) & (parallax >= min_parallax_rad))
+    out: NDArray[np.float64] = rs.origins_fl[a][ia] + t1[ia, ib][:, None] * rs.units[a][ia]
+    return out
 
 
 def _lines_of_sight(h: Hypothesis, min_rad: float) -> int:

