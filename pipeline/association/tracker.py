@@ -873,7 +873,7 @@ def _crossings(rs: _RaySet, index: int, min_parallax_rad: float) -> NDArray[np.f
     ua, ub = rs.units[a][:, None, :], rs.units[b][None, :, :]
     cross = ua[..., 0] * ub[..., 1] - ua[..., 1] * ub[..., 0]
     d = rs.origins_fl[b][None, :, :] - rs.origins_fl[a][:, None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # parallel: no crossing
         t1 = (d[..., 0] * ub[..., 1] - d[..., 1] * ub[..., 0]) / cross
         t2 = (d[..., 0] * ua[..., 1] - d[..., 1] * ua[..., 0]) / cross
     parallax = np.abs(wrap_rad(rs.dirs_rad[a][:, None] - rs.dirs_rad[b][None, :]))
