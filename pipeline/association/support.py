@@ -9,7 +9,9 @@ where no landmark stands mostly is not (its predictions meet no blob, or a blob 
 landmark explains as well). :class:`Support` counts each prediction's outcome;
 :meth:`Support.doubt` says when the name is doubtful. Measured on simulated runs of 8
 identical landmarks (docs/RESULTS.md): names more than 10 cm off any landmark were seen at 0-35
-% of their predictions, correct names mostly at 80-100 %. A name seen at too few keyframes
+% of their predictions, correct names mostly at 80-100 %; the wrong names seen more often were
+mostly missed (no detection of their class in their gate) at a fifth of their predictions or
+more, which 0.6 % of the correct names were. A name seen at too few keyframes
 since its naming for either to show is unconfirmed (:meth:`Support.unconfirmed`): reported, as
 the name has not yet been put to the test.
 """
@@ -28,8 +30,11 @@ Outcome = Literal["seen", "missed", "contested", "vague"]
 DOUBT_MIN_PREDICTIONS = 6
 #: ... and seen at fewer than this share of them,
 DOUBT_SEEN_SHARE = 1.0 / 3.0
-#: or predicted at this many and seen at none.
+#: or predicted at this many and seen at none,
 DOUBT_NEVER_SEEN = 2
+#: or predicted at DOUBT_MIN_PREDICTIONS and missed (no detection of its class in its gate) at
+#: this share of them or more.
+DOUBT_MISSED_SHARE = 0.2
 #: A name not doubtful is confirmed once seen at this many keyframes since it was named (two
 #: movements' worth, beyond the lines of sight or the keyframes that named it).
 CONFIRM_MIN_SEEN = 4
@@ -66,7 +71,8 @@ class Support:
         """Why the name is doubtful (None: it is not)."""
         n = self.predicted
         never = n >= DOUBT_NEVER_SEEN and self.seen == 0
-        if not never and (n < DOUBT_MIN_PREDICTIONS or self.seen >= DOUBT_SEEN_SHARE * n):
+        rare = self.seen < DOUBT_SEEN_SHARE * n or self.missed >= DOUBT_MISSED_SHARE * n
+        if not never and (n < DOUBT_MIN_PREDICTIONS or not rare):
             return None
         return (
             f"seen at {self.seen} of {n} keyframes where predicted since it was named "

@@ -140,10 +140,10 @@ def test_a_doubtful_name_is_retracted_for_a_landmark_the_full_catalog_kept_out(
 def test_names_off_their_landmark_are_reported_doubtful(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
-    # layouts where a name given to rays of several landmarks stays (found on seeds 1-260, the
-    # only two: blue#8 of unwrapped 144, 10.2 cm off, seen at 5 of 20 predictions; blue#3 of
-    # omni 220, 86 cm off, 7 of 28): seen at few of the keyframes where the map predicts it, it
-    # is reported as doubtful in the summary, its result line and Rerun; the names on real
+    # layouts where a name given to rays of several landmarks stays (blue#8 of unwrapped 144,
+    # 10.2 cm off, seen at 5 of 20 predictions; blue#3 of omni 220, 86 cm off, 7 of 28; 8 such
+    # runs on seeds 1-320): seen at few of the keyframes where the map predicts it, it is
+    # reported as doubtful in the summary, its result line and Rerun; the names on real
     # landmarks are not
     from replay.process import result_line
 
@@ -160,29 +160,31 @@ def test_names_off_their_landmark_are_reported_doubtful(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 76)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 33), ("omni", 33)])
 def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
-    # a layout where a wrong name is seen too few times after its naming for the doubt rule to
-    # judge it (unwrapped 76: blue#8, given anew with movement 19, 82 cm off; the one case on
-    # seeds 1-260 of either camera): it ends unconfirmed in the summary, its result line and
-    # Rerun; names on their landmarks seen often since end confirmed (one named late may be
-    # unconfirmed too)
+    # layouts where the last landmark is named with movement 18 of 20: from its naming on, at
+    # most 2 of its predictions come after it (4 confirm a name), so nothing can tell yet
+    # whether it stands on a landmark. It ends unconfirmed in the summary, its result line and
+    # Rerun, and is flagged from the movement that names it to the last; the names seen often
+    # since end confirmed. (The wrong names this report is for, named too late for the doubt
+    # rule to judge, were 2 of the 320 runs of seeds 1-160 before names often missed were made
+    # doubtful, and none since, on seeds 1-320.)
     from replay.process import result_line
 
-    log, s, off = _off_names(camera, seed, tmp_path)
+    log, s = _simulated(camera, seed, tmp_path)
+    moves = s.summary["movements"]
+    named_at = {n: m["index"] for m in reversed(moves) for n in m.get("named_landmarks", ())}
+    late = {n for n, k in named_at.items() if k >= moves[-1]["index"] - 1}
     unconfirmed = s.summary["association"]["unconfirmed"]
-    assert off <= set(unconfirmed) and "doubtful" not in s.summary["association"]
-    assert len(unconfirmed) <= len(off) + 1 and len(s.errors_m) >= 6
+    assert late and late <= set(unconfirmed) and "doubtful" not in s.summary["association"]
+    assert len(unconfirmed) <= len(late) + 1 and s.n_named == 8
     assert all("keyframe(s) since it was named" in why for why in unconfirmed.values())
     assert f"unconfirmed: {', '.join(sorted(unconfirmed))}" in result_line(s.summary)
-    # per movement, from the one that names it on
-    moves = s.summary["movements"]
-    for name in off:
-        named = next(m["index"] for m in moves if name in m.get("named_landmarks", ()))
+    for name in late:
         flagged = [m["index"] for m in moves if name in m.get("unconfirmed_landmarks", {})]
-        assert flagged[0] == named and flagged[-1] == moves[-1]["index"]
+        assert flagged[0] == named_at[name] and flagged[-1] == moves[-1]["index"]
     last, _ = _replayed(log, tmp_path)
     labelled = {n.removesuffix(" (unconfirmed)") for n in last if n.endswith(" (unconfirmed)")}
-    assert off <= labelled <= set(unconfirmed)  # a name not in the map yet has no label
+    assert labelled <= set(unconfirmed)  # a name not in the map yet has no label
