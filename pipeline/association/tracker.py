@@ -351,7 +351,8 @@ class Associator:
         mapped: Mapping[str, LandmarkEstimate],
         trajectory: Mapping[int, MovementPose] | None = None,
     ) -> None:
-        """Grow, start, confirm and drop hypotheses with this movement's free detections.
+        """Grow, start, confirm and drop hypotheses with this movement's free detections;
+        search the unnamed detections of the last movements for a landmark they missed.
 
         ``pose`` is the movement as the estimator placed it (None: not placed; then the
         association's own placement is used, if any), ``mapped`` the estimator's map after it,
@@ -420,7 +421,7 @@ class Associator:
         points: NDArray[np.float64],
         covs: NDArray[np.float64],
         origin: NDArray[np.float64],
-        heading: float,
+        heading: float | NDArray[np.float64],
         pos_var: float,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return predict_bearings(
@@ -691,12 +692,12 @@ class Associator:
             [p.o1_fl if e == 0 else p.o2_fl for p, (_, e) in zip(poses, keys, strict=True)]
         )
         n = len(keys)
-        pred, std = predict_bearings(
-            origins,
-            np.array([p.heading_rad for p in poses]),
+        pred, std = self._predict(
             np.broadcast_to(h.point_fl, (n, 2)),
             np.broadcast_to(h.cov_fl, (n, 2, 2)),
-            bearing_var_rad=2.0 * self.sigma_rad**2,
+            origins,
+            np.array([p.heading_rad for p in poses]),
+            0.0,
         )
         seen = predicted = 0
         for i, key in enumerate(keys):
