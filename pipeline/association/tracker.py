@@ -643,9 +643,9 @@ class Associator:
         if full and self._most_doubtful(label) is None:
             return
         rays = [
-            _on(Ray(m, e, j, b, (0.0, 0.0), 0.0), self._trajectory[m])
+            self._ray(m, e, j, b, pose.o2_fl if e else pose.o1_fl, pose.heading_rad)
             for m, e, j, b in kept
-            if m in self._trajectory
+            if (pose := self._trajectory.get(m)) is not None
         ]
         if len(rays) < DISCOVER_KEYFRAMES:
             return
