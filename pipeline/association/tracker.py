@@ -60,7 +60,7 @@ from pipeline.association.predict import predict_bearings
 from pipeline.association.support import Outcome, Support
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
-from pipeline.joint.geometry import MovementPose, Sightings, resect
+from pipeline.joint.geometry import MovementPose, Sightings, pose_params, resect
 
 #: A hypothesis missing from this many keyframes where it was predicted is dropped.
 MAX_MISSES = 2
@@ -236,7 +236,7 @@ class Associator:
             chained = _place_chained(s, self._last[1].o2_fl, self.sigma_rad)
             if chained is not None:
                 pose = chained[0]
-                r = s.residuals(np.array([*pose.o1_fl, pose.heading_rad, math.log(pose.length_fl)]))
+                r = s.residuals(pose_params(pose))
                 if 1.4826 * float(np.median(np.abs(r))) <= PLACEMENT_MAX_EPS * self.eps_rad:
                     return chained
         if n1 + n2 < 4:

@@ -34,7 +34,9 @@ from pipeline.joint import graph as g
 from pipeline.joint.geometry import (
     MovementPose,
     Sightings,
+    determinacy,
     intersect_rays,
+    pose_params,
     predicted_bearings,
     resect,
 )
@@ -53,6 +55,9 @@ RESECTION_MAX_EPS = 2.0
 #: landmarks it sees) and its length (std of log d) are this well determined.
 RESECTION_MAX_REL_STD = 0.25
 RESECTION_MAX_LOG_STD = 0.5
+#: A movement these bounds did not determine is resected again, though it sees the same mapped
+#: landmarks, once its last fit is within this many times the bounds (the map moved under it).
+UNDETERMINED_MARGIN = 2.0
 #: The bootstrap waits for this many more bearings than unknowns (a check on its fit), unless
 #: every movement in it has a reference pair the paper would use (parallax over 2 eps).
 BOOTSTRAP_DOF = 2
@@ -93,6 +98,16 @@ class _Movement:
         for b in self.bearings:
             ends[b.end][b.landmark] = b.bearing_rad
         return MovementObservation(self.index, ends[0], ends[1], self.turn_rad, self.distance_m)
+
+
+def _reach(s: Sightings, o1_fl: NDArray[np.float64]) -> float:
+    """Median distance (FL) of the sighted landmarks from O1 (2,)."""
+    return float(np.median(np.hypot(*(s.points_fl - o1_fl).T)))
+
+
+#: What a movement saw of the map: whether its start is pinned (previous movement placed), how
+#: many bearings it has, and the mapped landmarks of its bearings (in order).
+_Seen = tuple[bool, int, tuple[str, ...]]
 
 
 @dataclass(frozen=True)
@@ -179,6 +194,8 @@ class JointSlam:
         self._factor_of: dict[g.Bearing, int] = {}
         self._staged: list[tuple[int, g.Bearing]] = []
         self._rejected: set[g.Bearing] = set()
+        # movements the bearings did not determine: what they saw, where the fit put them
+        self._undetermined: dict[int, tuple[_Seen, NDArray[np.float64], NDArray[np.bool_]]] = {}
         self._estimates: dict[str, LandmarkEstimate] = {}
         self.noise: NoiseEstimate | None = None
         self.reinitializations = 0
@@ -273,7 +290,14 @@ class JointSlam:
 
     def _place(self, m: _Movement) -> tuple[MovementPose, set[g.Bearing]] | str:
         """The movement's pose by resection against the map and its bearings beyond
-        :data:`REJECT_EPS` eps of it (wrong detections), or why it cannot be placed."""
+        :data:`REJECT_EPS` eps of it (wrong detections), or why it cannot be placed.
+
+        A movement the bearings did not determine is not resected again while it sees the same
+        mapped landmarks with the same bearings and the same start (placed previous movement
+        or not), as long as they still clearly (:data:`UNDETERMINED_MARGIN`) do not determine
+        it at the pose last fitted against the map as it is now. A fit that determines nothing
+        at all (singular) is no such evidence: a degenerate local optimum looks the same.
+        """
         used = [b for b in m.bearings if b.landmark in self._in_graph]
         s = self._sightings(m)
         n1 = int((s.end == 0).sum())
@@ -285,6 +309,17 @@ class JointSlam:
                 f"too few bearings of mapped landmarks ({n1} at O1, {n2} at O2; "
                 f"need one at each and {need} in all)"
             )
+        seen = (chained, len(m.bearings), tuple(b.landmark for b in used))
+        held = self._undetermined.get(m.index)
+        if held is not None and held[0] == seen:
+            x, keep = held[1], held[2]
+            why = self._undetermined_why(
+                *determinacy(s.subset(keep), x, o1_known=chained),
+                _reach(s, x[:2]),
+                margin=UNDETERMINED_MARGIN,
+            )
+            if why is not None:
+                return why
         guess = self._reference_guess(m.observation())
         o1_known = self._movement_pose(m.index - 1).o2_fl if chained else None
         found = resect(
@@ -301,16 +336,31 @@ class JointSlam:
                 f"resection does not fit the map (robust residual {math.degrees(robust):.2f} "
                 f"deg > {RESECTION_MAX_EPS:g} eps)"
             )
-        reach = float(np.median(np.hypot(*(s.points_fl - found.pose.o1_fl).T)))
-        rel = found.position_std_fl * self.sigma0_rad / max(reach, 1e-9)
-        logd = found.log_length_std * self.sigma0_rad
-        if rel > RESECTION_MAX_REL_STD or logd > RESECTION_MAX_LOG_STD:
+        why = self._undetermined_why(
+            found.position_std_fl, found.log_length_std, _reach(s, found.pose.o1_fl)
+        )
+        if why is not None:
+            if math.isfinite(found.position_std_fl) and math.isfinite(found.log_length_std):
+                self._undetermined[m.index] = (seen, pose_params(found.pose), found.inliers)
+            return why
+        self._undetermined.pop(m.index, None)
+        far = np.abs(found.residuals_rad) > REJECT_EPS * self.eps_rad
+        return found.pose, {b for b, out in zip(used, far, strict=True) if out}
+
+    def _undetermined_why(
+        self, position_std: float, log_length_std: float, reach_fl: float, *, margin: float = 1.0
+    ) -> str | None:
+        """Why bearings do not determine a movement, from the stds of its fit for a bearing
+        noise of 1 rad (:func:`pipeline.joint.geometry.determinacy`) and the median distance
+        (FL) of the landmarks from O1 (None when they do, within ``margin`` times the bounds)."""
+        rel = position_std * self.sigma0_rad / max(reach_fl, 1e-9)
+        logd = log_length_std * self.sigma0_rad
+        if rel > margin * RESECTION_MAX_REL_STD or logd > margin * RESECTION_MAX_LOG_STD:
             return (
                 f"bearings of mapped landmarks do not determine the movement (relative std of "
                 f"O1 {rel:.2g}, of log length {logd:.2g})"
             )
-        far = np.abs(found.residuals_rad) > REJECT_EPS * self.eps_rad
-        return found.pose, {b for b, out in zip(used, far, strict=True) if out}
+        return None
 
     def _links_of(self, k: int) -> list[tuple[int, int]]:
         """In-place links of movement ``k`` to its placed neighbours."""

@@ -252,9 +252,7 @@ def resect(
     cost = (s.residuals(cand.reshape(-1, 4)) ** 2).sum(axis=1)
     order = np.argsort(cost)[: 1 if o1_known_fl is not None else 4]
     seeds = [cand.reshape(-1, 4)[i] for i in order]
-    seeds += [
-        np.array([g.o1_fl[0], g.o1_fl[1], g.heading_rad, math.log(g.length_fl)]) for g in guesses
-    ]
+    seeds += [pose_params(g) for g in guesses]
     best: tuple[NDArray[np.float64], float] | None = None
     for x0 in seeds:
         x = _refine(s, x0)
@@ -270,21 +268,35 @@ def resect(
         keep[np.flatnonzero(keep)[np.argmax(np.abs(r[keep]))]] = False  # a wrong detection
         x = _refine(s.subset(keep), x)
         r = _residuals_at(s, x)
-    jac = _jacobian(s.subset(keep), x)
-    info = jac.T @ jac
-    if o1_known_fl is not None:  # the turn in place pins O1 (to first order)
-        info[0, 0] += 1e12
-        info[1, 1] += 1e12
-    try:
-        cov = np.linalg.inv(info)
-        pos = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
-        logd = math.sqrt(max(float(cov[3, 3]), 0.0))
-    except np.linalg.LinAlgError:
-        pos = logd = math.inf
-    if not (math.isfinite(pos) and math.isfinite(logd)) or np.linalg.cond(info) > 1e14:
-        pos = logd = math.inf
+    pos, logd = determinacy(s.subset(keep), x, o1_known=o1_known_fl is not None)
     pose = MovementPose(x[:2].copy(), float(wrap_rad(float(x[2]))), float(_length(x[3])))
     return Resection(pose, r, keep, pos, logd)
+
+
+def pose_params(pose: MovementPose) -> NDArray[np.float64]:
+    """A pose as the resection's parameters (4,): x, y (FL), heading (rad), log length."""
+    return np.array([pose.o1_fl[0], pose.o1_fl[1], pose.heading_rad, math.log(pose.length_fl)])
+
+
+def determinacy(
+    s: Sightings, x: NDArray[np.float64], *, o1_known: bool = False
+) -> tuple[float, float]:
+    """How well bearings ``s`` pin a movement at parameters ``x`` (4,): std (FL) of O1 along
+    its worst direction and std of ``log d``, for a bearing noise of std 1 rad (inf when they
+    do not determine it). ``o1_known``: O1 is pinned (the turn in place after a placed
+    movement)."""
+    jac = _jacobian(s, x)
+    free = slice(2, 4) if o1_known else slice(0, 4)  # the turn in place pins O1
+    info = (jac.T @ jac)[free, free]
+    try:
+        cov = np.linalg.inv(info)
+        pos = 0.0 if o1_known else math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+        logd = math.sqrt(max(float(cov[-1, -1]), 0.0))
+    except np.linalg.LinAlgError:
+        return math.inf, math.inf
+    if not (math.isfinite(pos) and math.isfinite(logd)) or np.linalg.cond(info) > 1e14:
+        return math.inf, math.inf
+    return pos, logd
 
 
 @dataclass(frozen=True)

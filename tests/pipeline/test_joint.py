@@ -447,3 +447,67 @@ def test_a_forgotten_landmark_leaves_no_trace_and_can_come_back() -> None:
     back, first = slam.estimates["L3"], never.estimates["L3"]
     assert np.hypot(*(back.mean_fl - first.mean_fl)) < 0.1 * np.sqrt(first.cov_fl.trace())
     # (kept, the wrong bearings had put it 2.9 FL off by movement 5)
+
+
+def test_an_undetermined_movement_is_not_resected_again_for_nothing(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Look-alike runs leave movements the map does not determine waiting; while they see the
+    same mapped landmarks they are judged at their last fit instead of being resected again,
+    which changes no result."""
+    import sys
+    from pathlib import Path
+
+    import pipeline.joint.estimator as joint_estimator
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from alike_synthetic import run_synthetic
+
+    calls = [0]
+    real = joint_estimator.resect
+
+    def counted(*args: object, **kwargs: object) -> object:
+        calls[0] += 1
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(joint_estimator, "resect", counted)
+    runs = [(4, 9), (8, 0), (8, 1)]  # (landmarks, seed): runs with such movements
+    cached = [run_synthetic(n, s).estimates_fl for n, s in runs]
+    with_cache = calls[0]
+    monkeypatch.setattr(joint_estimator, "UNDETERMINED_MARGIN", math.inf)  # always resect
+    calls[0] = 0
+    fresh = [run_synthetic(n, s).estimates_fl for n, s in runs]
+    assert calls[0] > with_cache + 50
+    for a, b in zip(cached, fresh, strict=True):
+        assert a.keys() == b.keys()
+        for name in a:
+            assert a[name] == pytest.approx(b[name], abs=0.0)
+
+
+def test_a_chained_movement_is_judged_on_its_heading_and_length_alone() -> None:
+    """With O1 pinned by the turn in place, only heading and log length are free: their
+    std comes from that 2x2 block (here weakly informed: two far landmarks), and the pin's
+    scale does not count against its conditioning."""
+    from pipeline.joint.geometry import determinacy
+
+    pts = np.array([[6.0, 4.0], [7.0, -3.0]])
+    o1, h, d = np.array([0.2, 0.1]), 0.3, 0.5
+    o2 = o1 + d * np.array([math.cos(h), math.sin(h)])
+    ends = np.array([0, 0, 1, 1])
+    pp = np.vstack([pts, pts])
+    origins = np.where(ends[:, None] == 0, o1, o2)
+    b = np.arctan2(pp[:, 1] - origins[:, 1], pp[:, 0] - origins[:, 0]) - h
+    s = Sightings(pp, ends, b)
+    x = np.array([*o1, h, math.log(d)])
+    step = 1e-6
+    jac = np.empty((4, 2))
+    for i in (2, 3):
+        dx = np.zeros(4)
+        dx[i] = step
+        jac[:, i - 2] = (s.residuals(x - dx) - s.residuals(x + dx)) / (2 * step)
+    expected = math.sqrt(np.linalg.inv(jac.T @ jac)[1, 1])
+    pos, logd = determinacy(s, x, o1_known=True)
+    assert pos == 0.0
+    assert logd == pytest.approx(expected, rel=1e-5)
+    _, free_logd = determinacy(s, x)  # O1 free: 4 bearings, 4 unknowns, far weaker
+    assert free_logd > logd
