@@ -83,7 +83,8 @@ class AlikeLandmarks:
             if used is not None and path is not None
             else None
         )
-        self.associator.hypothesize(assoc, pose, estimator.estimates, trajectory)
+        scatter = getattr(estimator, "bearing_scatter", None)
+        self.associator.hypothesize(assoc, pose, estimator.estimates, trajectory, scatter)
         for name in assoc.retracted:
             estimator.forget(name)
         add_history = getattr(estimator, "add_history", None)

@@ -2,11 +2,13 @@
 too little to trust the name.
 
 A landmark of a shared class is named from a few rays (four lines of sight over two
-movements). Rays of several landmarks can meet by chance, and such a name fits its own rays as
-well as a real landmark does, so its residuals do not give it away. What does: from the
+movements). Rays of several landmarks can meet by chance, and such a name fits those few rays
+as well as a real landmark does, so its residuals do not give it away then. What does: from the
 keyframes that come after, a real landmark is mostly seen where the map predicts it, a point
 where no landmark stands mostly is not (its predictions meet no blob, or a blob another
-landmark explains as well). :class:`Support` counts each prediction's outcome;
+landmark explains as well); and when it is seen, it is in turn by landmarks that line up with
+it, whose bearings in the map scatter about it more widely than a real landmark's do.
+:class:`Support` counts each prediction's outcome and keeps the estimator's scatter;
 :meth:`Support.doubt` says when the name is doubtful. Measured on simulated runs of 8
 identical landmarks (docs/RESULTS.md): names more than 10 cm off any landmark were seen at 0-35
 % of their predictions, correct names mostly at 80-100 %; the wrong names seen more often were
@@ -35,6 +37,13 @@ DOUBT_NEVER_SEEN = 2
 #: or predicted at DOUBT_MIN_PREDICTIONS and missed (no detection of its class in its gate) at
 #: this share of them or more.
 DOUBT_MISSED_SHARE = 0.2
+#: A name is also doubtful when it has this many bearings in the map...
+DOUBT_SCATTER_BEARINGS = 10
+#: ... and they scatter about it this many times as widely as the map's bearings do (robust
+#: scales; :attr:`pipeline.joint.JointSlam.bearing_scatter`): rays of several landmarks meet
+#: only roughly. Measured at the end of 440 simulated runs of 8 identical landmarks
+#: (docs/RESULTS.md): 17 of the 26 names more than 10 cm off scatter more, 5 of 3,441 correct ones.
+DOUBT_SCATTER = 1.7
 #: A name not doubtful is confirmed once seen at this many keyframes since it was named (two
 #: movements' worth, beyond the lines of sight or the keyframes that named it).
 CONFIRM_MIN_SEEN = 4
@@ -50,6 +59,9 @@ class Support:
         The movement that named it (its own keyframes are not counted: they named it).
     seen, missed, contested, vague : int
         Keyframes since then where its prediction had that outcome.
+    scatter : (int, float) or None
+        Its bearings in the map and how widely they scatter about it (the estimator's
+        :attr:`~pipeline.joint.JointSlam.bearing_scatter`; None: not known).
     """
 
     named_at: int
@@ -57,6 +69,7 @@ class Support:
     missed: int = 0
     contested: int = 0
     vague: int = 0
+    scatter: tuple[int, float] | None = None
 
     @property
     def predicted(self) -> int:
@@ -73,7 +86,15 @@ class Support:
         never = n >= DOUBT_NEVER_SEEN and self.seen == 0
         rare = self.seen < DOUBT_SEEN_SHARE * n or self.missed >= DOUBT_MISSED_SHARE * n
         if not never and (n < DOUBT_MIN_PREDICTIONS or not rare):
-            return None
+            if self.scatter is None:
+                return None
+            count, ratio = self.scatter
+            if count < DOUBT_SCATTER_BEARINGS or ratio <= DOUBT_SCATTER:
+                return None
+            return (
+                f"its {count} bearings in the map scatter {ratio:.1f} times as widely as the "
+                "map's bearings do: they may come from several landmarks"
+            )
         return (
             f"seen at {self.seen} of {n} keyframes where predicted since it was named "
             f"(movement {self.named_at}; {self.missed} missed, {self.contested} contested, "

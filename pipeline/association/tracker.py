@@ -324,7 +324,14 @@ class Associator:
             if support is not None and support.named_at < out.index:
                 for outcome in outcomes:
                     support.add(outcome)
+        self._report(out)
+
+    def _report(self, out: MovementAssociation) -> None:
+        """Report the doubtful and the unconfirmed names (as of now) in ``out``."""
         for name, support in self.support.items():
+            out.doubtful.pop(name, None)
+            out.unresolved.pop(f"{name} doubtful", None)
+            out.unconfirmed.pop(name, None)
             why = support.doubt()
             if why is not None:
                 out.doubtful[name] = why
@@ -350,6 +357,7 @@ class Associator:
         pose: MovementPose | None,
         mapped: Mapping[str, LandmarkEstimate],
         trajectory: Mapping[int, MovementPose] | None = None,
+        scatter: Mapping[str, tuple[int, float]] | None = None,
     ) -> None:
         """Grow, start, confirm and drop hypotheses with this movement's free detections;
         search the unnamed detections of the last movements for a landmark they missed.
@@ -358,11 +366,16 @@ class Associator:
         association's own placement is used, if any), ``mapped`` the estimator's map after it,
         ``trajectory`` the estimator's current placement of earlier movements (index -> pose):
         rays kept from them are placed anew (early placements, from few landmarks, are
-        rough). Landmarks named now are in ``out.confirmed`` and their bearings in
-        ``out.history``.
+        rough). ``scatter`` is how widely each mapped name's bearings scatter about it
+        (:attr:`pipeline.joint.JointSlam.bearing_scatter`; a name that scatters too widely is
+        doubtful). Landmarks named now are in ``out.confirmed`` and their bearings in
+        ``out.history``; the doubtful and unconfirmed names are reported anew.
         """
+        for named, support in self.support.items():
+            support.scatter = (scatter or {}).get(named)
         pose = pose or out.pose
         if pose is None:
+            self._report(out)
             return
         if trajectory:
             self._replace(trajectory)
@@ -402,6 +415,7 @@ class Associator:
                     f"({len(self.hypotheses[c])} hypothesis(es) of {c} open)",
                 )
         out.n_hypotheses = sum(len(h) for h in self.hypotheses.values())
+        self._report(out)
 
     def _known(
         self, label: str, mapped: Mapping[str, LandmarkEstimate]

@@ -239,6 +239,22 @@ class JointSlam:
         return math.exp(-float(self._values.atVector(g.SCALE_KEY)[0]))
 
     @property
+    def bearing_scatter(self) -> dict[str, tuple[int, float]]:
+        """Per non-reference landmark in the map: how many bearings it has there and how widely
+        they scatter about it, as the robust scale of their residuals (1.4826 times their median
+        absolute value) over the map's bearing noise (:attr:`noise`). Near 1 for a landmark whose
+        rays meet at one point; well above for bearings of several landmarks given one name."""
+        if self.noise is None:
+            return {}
+        used, r = self._residuals()
+        by: dict[str, list[float]] = {}
+        for b, x in zip(used, np.abs(r), strict=True):
+            if b.landmark not in self.reference:
+                by.setdefault(b.landmark, []).append(float(x))
+        sigma = max(self.noise.sigma_rad, 1e-12)
+        return {n: (len(v), 1.4826 * float(np.median(v)) / sigma) for n, v in by.items()}
+
+    @property
     def used_movements(self) -> list[int]:
         """Indices of the movements in the graph, in order."""
         return sorted(self._placed)

@@ -121,7 +121,7 @@ def run_synthetic(
         path = zip(slam.used_movements, slam.trajectory_fl, strict=True)  # type: ignore[attr-defined]
         trajectory = {k: pose_between(*ends) for k, ends in path}
         t_assoc = time.perf_counter()
-        assoc.hypothesize(a, pose, slam.estimates, trajectory)
+        assoc.hypothesize(a, pose, slam.estimates, trajectory, slam.bearing_scatter)  # type: ignore[attr-defined]
         out.association_seconds += time.perf_counter() - t_assoc
         for name in a.retracted:
             slam.forget(name)

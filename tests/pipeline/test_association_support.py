@@ -14,6 +14,8 @@ from pipeline.association.support import (
     DOUBT_MIN_PREDICTIONS,
     DOUBT_MISSED_SHARE,
     DOUBT_NEVER_SEEN,
+    DOUBT_SCATTER,
+    DOUBT_SCATTER_BEARINGS,
     DOUBT_SEEN_SHARE,
     Outcome,
     Support,
@@ -64,6 +66,24 @@ def test_a_name_never_seen_again_is_doubtful_early() -> None:
     assert _support(*outcomes[:-1]).doubt() is None
     why = _support(*outcomes).doubt()
     assert why is not None and "seen at 0 of" in why
+
+
+def test_a_name_whose_bearings_scatter_is_doubtful_however_often_seen() -> None:
+    # seen at every prediction, but its bearings in the map meet only roughly: rays of several
+    # landmarks that line up with it in turn
+    s = _support(*["seen"] * 20)
+    s.scatter = (DOUBT_SCATTER_BEARINGS, DOUBT_SCATTER * 1.01)
+    why = s.doubt()
+    assert why is not None and f"its {DOUBT_SCATTER_BEARINGS} bearings in the map scatter" in why
+    assert s.unconfirmed() is None  # doubtful, not unconfirmed
+    s.scatter = (DOUBT_SCATTER_BEARINGS - 1, 5.0 * DOUBT_SCATTER)  # too few bearings to tell
+    assert s.doubt() is None
+    s.scatter = (50, DOUBT_SCATTER)
+    assert s.doubt() is None
+    # the counts' reason comes first
+    rare = _support(*["missed"] * DOUBT_MIN_PREDICTIONS)
+    rare.scatter = (50, 2.0 * DOUBT_SCATTER)
+    assert "seen at 0 of" in (rare.doubt() or "")
 
 
 def test_a_name_is_unconfirmed_until_seen_enough_and_never_both() -> None:

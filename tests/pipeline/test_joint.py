@@ -511,3 +511,25 @@ def test_a_chained_movement_is_judged_on_its_heading_and_length_alone() -> None:
     assert logd == pytest.approx(expected, rel=1e-5)
     _, free_logd = determinacy(s, x)  # O1 free: 4 bearings, 4 unknowns, far weaker
     assert free_logd > logd
+
+
+def test_bearing_scatter_singles_out_a_landmark_whose_rays_do_not_meet() -> None:
+    """L3's bearings moved 1.5 eps one way at even movements and the other way at odd ones
+    (rays that meet only roughly, like those of several landmarks given one name): they scatter
+    far more about L3 than L4's do about L4; on the clean run both are at the noise level."""
+    shift = 1.5 * EPS
+    for seed in range(6):
+        run = simulate_bearings(10, np.random.default_rng(seed), eps_rad=EPS)
+        obs = list(run.observations)
+        for k, o in enumerate(obs):
+            d = shift if k % 2 else -shift
+            obs[k] = replace(
+                o,
+                bearings_o1_rad={n: b + d * (n == "L3") for n, b in o.bearings_o1_rad.items()},
+                bearings_o2_rad={n: b + d * (n == "L3") for n, b in o.bearings_o2_rad.items()},
+            )
+        rough = _joint(replace(run, observations=obs), PAPER_REFERENCE, 0).bearing_scatter
+        clean = _joint(run, PAPER_REFERENCE, 0).bearing_scatter
+        assert rough["L3"][0] == rough["L4"][0] == 20, seed
+        assert rough["L3"][1] > max(1.5, 2.0 * rough["L4"][1]), (seed, rough)
+        assert max(clean["L3"][1], clean["L4"][1]) < 1.3, (seed, clean)
