@@ -191,6 +191,10 @@ class MovementRecord:
         detected there (hidden behind another, out of range).
     named_landmarks : list of str
         Landmarks of shared classes named with this movement (confirmed hypotheses).
+    named_from : dict name -> list of (movement, end, bearing_rad)
+        The landmarks named with this movement: the keyframe detections each was named from
+        (``end`` 0 at O1, 1 at O2; this movement's included), which the estimator takes as its
+        bearings from then on.
     doubtful_landmarks : dict name -> reason or None
         Named landmarks of shared classes whose predictions since their naming were too rarely
         seen (:mod:`pipeline.association.support`); None where association did not run.
@@ -226,6 +230,7 @@ class MovementRecord:
     also_placed: tuple[int, ...] = ()
     not_visible: Mapping[str, str] = field(default_factory=dict)
     named_landmarks: Sequence[str] = ()
+    named_from: Mapping[str, Sequence[tuple[int, int, float]]] = field(default_factory=dict)
     doubtful_landmarks: Mapping[str, str] | None = None
     unconfirmed_landmarks: Mapping[str, str] | None = None
 

@@ -344,6 +344,7 @@ class Runner:
                     record,
                     not_visible=dict(assoc.not_visible),
                     named_landmarks=assoc.confirmed,
+                    named_from=dict(assoc.history),
                     doubtful_landmarks=dict(assoc.doubtful),
                     unconfirmed_landmarks=dict(assoc.unconfirmed),
                 )

@@ -13,8 +13,9 @@ their landmarks are named by association (``red#1``, ... in order of confirmatio
 :mod:`pipeline.association`). ``movements[k].ambiguous_landmarks`` (key -> reason) is what
 movement k left unresolved (contested or unexplained detections, a movement not placed),
 ``not_visible`` the named landmarks predicted but not detected, ``named_landmarks`` those named
-with it, ``unconfirmed_landmarks`` the names not yet seen often enough since their naming to
-tell; ``association`` sums up the names per class, the catalog counts, the movements with
+with it and ``named_from`` the keyframe detections each was named from,
+``unconfirmed_landmarks`` the names not yet seen often enough since their naming to tell;
+``association`` sums up the names per class, the catalog counts, the movements with
 something unresolved, the names still ``doubtful`` after the last movement (name -> why: seen
 too rarely where predicted since named), those still ``unconfirmed`` (name -> why) and, for
 simulated logs, ``matched_truth`` (each ``red#k`` matched to the nearest true landmark of its
@@ -133,6 +134,18 @@ class SummarySink:
             entry["not_visible"] = dict(record.not_visible)
         if record.named_landmarks:
             entry["named_landmarks"] = list(record.named_landmarks)
+        if record.named_from:
+            entry["named_from"] = {
+                name: [
+                    {
+                        "movement": m,
+                        "at": "O1" if end == 0 else "O2",
+                        "bearing_deg": _bearing_deg(b),
+                    }
+                    for m, end, b in rays
+                ]
+                for name, rays in record.named_from.items()
+            }
         if record.doubtful_landmarks is not None:
             self._doubtful = dict(record.doubtful_landmarks)
         if record.unconfirmed_landmarks is not None:

@@ -1,9 +1,10 @@
 """Scoring association on simulated logs: which true landmark each associated bearing saw.
 
-A bearing given to ``blue#k`` at a keyframe is correct when it is within the bearing error
-bound eps of the true bearing (from the true keyframe; heading: the movement's true direction)
-of the true landmark :func:`replay.truth.match_truth` matches ``blue#k`` to: a blob where two
-landmarks line up is a correct bearing of either. ``n_nearest`` counts the stricter reading:
+A bearing given to ``blue#k`` at a keyframe (then, or later with the name: ``named_from``) is
+correct when it is within the bearing error bound eps of the true bearing (from the true
+keyframe; heading: the movement's true direction) of the true landmark
+:func:`replay.truth.match_truth` matches ``blue#k`` to: a blob where two landmarks line up is a
+correct bearing of either. ``n_nearest`` counts the stricter reading:
 that landmark is also the one of the class whose true bearing is nearest.
 """
 
@@ -86,27 +87,41 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
     matched = match_truth(truth, means, classes)
     members = {n: label for label, names in classes.items() for n in names}
     eps = session.vision_error_rad
+    keyframes = {
+        rec.index: (rec.truth_o1_world, rec.truth_o2_world)
+        for rec in collect.records
+        if rec.truth_o1_world is not None and rec.truth_o2_world is not None
+    }
+    # every bearing given to a name: at its keyframe, or later with the name (named_from)
+    given = [
+        (name, rec.index, end, b)
+        for rec in collect.records
+        for name, pair in rec.bearings_rad.items()
+        for end, b in enumerate(pair)
+        if b is not None
+    ]
+    given += [
+        (name, movement, end, b)
+        for rec in collect.records
+        for name, rays in rec.named_from.items()
+        for movement, end, b in rays
+    ]
     correct = nearest = associated = 0
-    for rec in collect.records:
-        if rec.truth_o1_world is None or rec.truth_o2_world is None:
+    for name, movement, end, b in given:
+        if "#" not in name or movement not in keyframes:
             continue
-        d = rec.truth_o2_world - rec.truth_o1_world
+        o1, o2 = keyframes[movement]
+        d = o2 - o1
         heading = math.atan2(d[1], d[0])
-        for name, pair in rec.bearings_rad.items():
-            if "#" not in name:
-                continue
-            label = name.rpartition("#")[0]
-            trues = [n for n, c in members.items() if c == label]
-            pts = np.array([truth.landmarks_world[n] for n in trues])
-            for origin, b in zip((rec.truth_o1_world, rec.truth_o2_world), pair, strict=True):
-                if b is None:
-                    continue
-                v = pts - origin
-                err = np.abs(wrap_rad(np.arctan2(v[:, 1], v[:, 0]) - heading - b))
-                associated += 1
-                own = matched.get(name)
-                correct += int(own is not None and err[trues.index(own)] <= eps)
-                nearest += int(trues[int(np.argmin(err))] == own)
+        label = name.rpartition("#")[0]
+        trues = [n for n, c in members.items() if c == label]
+        pts = np.array([truth.landmarks_world[n] for n in trues])
+        v = pts - (o1, o2)[end]
+        err = np.abs(wrap_rad(np.arctan2(v[:, 1], v[:, 0]) - heading - b))
+        associated += 1
+        own = matched.get(name)
+        correct += int(own is not None and err[trues.index(own)] <= eps)
+        nearest += int(trues[int(np.argmin(err))] == own)
     errors = {n: truth.error_m(t, means[n]) for n, t in matched.items()}
     firsts = [names[0] for names in classes.values()]
     detections = sum(len(f.detections[n].blobs) for f in collect.frames for n in firsts)

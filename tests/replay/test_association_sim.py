@@ -61,7 +61,9 @@ def test_detections_are_associated_correctly(scored: Score) -> None:
     # issue 11's goal: >= 98 % of detections associated correctly; a detection is either named
     # correctly, or left unnamed and reported (never forced): at most 2 % named wrongly
     assert scored.wrong_share <= 0.02
-    assert scored.n_associated >= 0.2 * scored.n_detections  # not correct by naming nothing
+    # not correct by naming nothing: most detections get their name, at their keyframe or with
+    # the name they led to (``named_from``; 91 % in this run, both cameras)
+    assert scored.n_correct >= 0.85 * scored.n_detections
     # among the named ones alone the share is lower (docs/RESULTS.md): a blob of a landmark
     # not yet named that lines up with a named one is taken for it
     assert scored.correct_share >= 0.9
@@ -83,6 +85,19 @@ def test_the_summary_names_and_reports(scored: Score) -> None:
     first = doc["movements"][0]
     assert "explained by no named landmark" in first["ambiguous_landmarks"]["blue unexplained"]
     assert not first["landmarks"]
+    # each name comes with the detections it was named from: four lines of sight at least,
+    # from this movement and earlier ones, none given to a name at its own keyframe
+    named = [m for m in doc["movements"] if m.get("named_landmarks")]
+    assert sorted(n for m in named for n in m["named_landmarks"]) == sorted(doc["landmarks"])
+    for m in named:
+        assert set(m["named_from"]) == set(m["named_landmarks"])
+        for rays in m["named_from"].values():
+            assert len(rays) >= 4
+            assert all(r["movement"] <= m["index"] and r["at"] in ("O1", "O2") for r in rays)
+            for r in rays:
+                then = doc["movements"][r["movement"]]["bearings_deg"]
+                end = 0 if r["at"] == "O1" else 1
+                assert all(pair[end] != r["bearing_deg"] for pair in then.values())
 
 
 @pytest.mark.slow
