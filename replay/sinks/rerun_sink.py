@@ -376,6 +376,13 @@ class RerunSink:
             )
         for name, why in doubtful.items():
             log("log", rr.TextLog(f"movement {record.index}: {name} doubtful: {why}", level="WARN"))
+        for name, rays in record.named_from.items():
+            moves = sorted({m for m, _, _ in rays})
+            text = (
+                f"movement {record.index}: {name} named from {len(rays)} detections "
+                f"(movements {moves[0]}-{moves[-1]})"
+            )
+            log("log", rr.TextLog(text, level="INFO"))
         for n in names:
             log(
                 f"map/ellipses/{n}",

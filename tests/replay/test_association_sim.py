@@ -172,6 +172,10 @@ def test_names_off_their_landmark_are_reported_doubtful(
     assert {n.removesuffix(" (doubtful)") for n in last if n.endswith(" (doubtful)")} == off
     texts = [t for r in rows["/log"] for t in r.get("TextLog:text") or ()]
     assert all(any(f"{n} doubtful: seen at" in t for t in texts) for n in off)
+    # and every name's first detections
+    for m in s.summary["movements"]:
+        for n, rays in m.get("named_from", {}).items():
+            assert any(f"{m['index']}: {n} named from {len(rays)} detections" in t for t in texts)
 
 
 @pytest.mark.slow
