@@ -62,6 +62,24 @@ def test_a_hidden_landmark_is_not_visible_not_misassociated() -> None:
     assert run.correct_share() >= 0.98
 
 
+@pytest.mark.parametrize("hidden", ["B1", "B4"])
+def test_a_hidden_landmark_whose_name_catches_other_blobs_is_reported_doubtful(
+    hidden: str,
+) -> None:
+    # hidden from movement 8 on, B1 and B4 of seed 4 let their names take blobs of landmarks
+    # not named yet that line up with their predictions (not fixed; docs/RESULTS.md): the
+    # name is then seen at too few of its predictions and ends doubtful, so the wrong bearings
+    # are not a silent error
+    def hide(move: int, end: int, name: str) -> bool:
+        return name == hidden and move >= 8
+
+    run = run_synthetic(8, 4, hide=hide)
+    name = next(n for n, t in run.matched().items() if t == hidden)
+    caught = [m for m, _, n, true in run.given if m >= 8 and n == name and true != hidden]
+    assert len(caught) >= 5  # else the run no longer shows the catch
+    assert name in run.results[-1].doubtful
+
+
 def test_a_movement_with_three_reference_bearings_is_chained_and_associated() -> None:
     # L2 hidden at O2 in every third movement from movement 6 on: three bearings of distinct
     # landmarks are too few for a resection, but such a movement starts where the last one
