@@ -197,7 +197,8 @@ class MovementRecord:
         bearings from then on.
     doubtful_landmarks : dict name -> reason or None
         Named landmarks of shared classes whose predictions since their naming were too rarely
-        seen (:mod:`pipeline.association.support`); None where association did not run.
+        seen, or whose bearings in the map scatter too widely (:mod:`pipeline.association.support`);
+        None where association did not run.
     unconfirmed_landmarks : dict name -> reason or None
         Named landmarks of shared classes, not doubtful, seen at too few keyframes since their
         naming to confirm the name; None where association did not run.

@@ -28,7 +28,8 @@ For each movement (its two keyframes, O1 and O2):
 
 5. What became of each named landmark's predictions since it was named (seen, missed,
    contested, too uncertain) is counted (:mod:`pipeline.association.support`); a name seen too
-   rarely is reported as doubtful every movement while it stays so, a name not seen often
+   rarely, or whose bearings in the joint map scatter too widely about it, is reported as
+   doubtful every movement while it stays so, a name not seen often
    enough since its naming to tell as unconfirmed. When the class's catalog is full and a
    hypothesis is confirmed, the most doubtful name is retracted and given to it.
 
@@ -130,7 +131,8 @@ class MovementAssociation:
         Per named landmark predicted at this movement's keyframes, what became of each
         prediction (:data:`~pipeline.association.support.Outcome`).
     doubtful : dict name -> str
-        Named landmarks whose predictions since their naming were too rarely seen
+        Named landmarks whose predictions since their naming were too rarely seen, or whose
+        bearings in the map scatter too widely
         (:meth:`~pipeline.association.support.Support.doubt`), with why; also in
         ``unresolved`` (key ``"<name> doubtful"``).
     unconfirmed : dict name -> str

@@ -17,9 +17,9 @@ with it and ``named_from`` the keyframe detections each was named from,
 ``unconfirmed_landmarks`` the names not yet seen often enough since their naming to tell;
 ``association`` sums up the names per class, the catalog counts, the movements with
 something unresolved, the names still ``doubtful`` after the last movement (name -> why: seen
-too rarely where predicted since named), those still ``unconfirmed`` (name -> why) and, for
-simulated logs, ``matched_truth`` (each ``red#k`` matched to the nearest true landmark of its
-class, one-to-one; ``error_m`` is measured against it).
+too rarely where predicted since named, or bearings that scatter too widely), those still
+``unconfirmed`` (name -> why) and, for simulated logs, ``matched_truth`` (each ``red#k`` matched
+to the nearest true landmark of its class, one-to-one; ``error_m`` is measured against it).
 """
 
 from __future__ import annotations
