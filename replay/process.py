@@ -122,10 +122,17 @@ def result_line(doc: dict[str, Any]) -> str:
             for label, n in assoc["catalog_count"].items()
         )
         text += f"; alike landmarks named: {named}"
+        counts = assoc.get("detections", {}).values()
+        seen = sum(c["at_keyframes"] for c in counts)
+        if seen:
+            text += f", {100 * sum(c['named'] for c in counts) / seen:.0f} % of {seen} detections"
         if assoc["movements_with_unresolved"]:
             text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
         if assoc.get("doubtful"):
-            text += f"; doubtful: {', '.join(assoc['doubtful'])} (seen too rarely where predicted)"
+            text += (
+                f"; doubtful: {', '.join(assoc['doubtful'])} "
+                "(seen too rarely where predicted, or bearings that scatter)"
+            )
         if assoc.get("unconfirmed"):
             names = ", ".join(assoc["unconfirmed"])
             text += f"; unconfirmed: {names} (seen too few times since named to tell)"

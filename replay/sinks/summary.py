@@ -16,10 +16,12 @@ movement k left unresolved (contested or unexplained detections, a movement not 
 with it and ``named_from`` the keyframe detections each was named from,
 ``unconfirmed_landmarks`` the names not yet seen often enough since their naming to tell;
 ``association`` sums up the names per class, the catalog counts, the movements with
-something unresolved, the names still ``doubtful`` after the last movement (name -> why: seen
-too rarely where predicted since named, or bearings that scatter too widely), those still
-``unconfirmed`` (name -> why) and, for simulated logs, ``matched_truth`` (each ``red#k`` matched
-to the nearest true landmark of its class, one-to-one; ``error_m`` is measured against it).
+something unresolved, per class the blobs ``detections`` at keyframes and how many of them got a
+name (at their keyframe or later, ``named_from``), the names still ``doubtful`` after the last
+movement (name -> why: seen too rarely where predicted since named, or bearings that scatter too
+widely), those still ``unconfirmed`` (name -> why) and, for simulated logs, ``matched_truth``
+(each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
+measured against it).
 """
 
 from __future__ import annotations
@@ -72,6 +74,9 @@ class SummarySink:
         self._matched: dict[str, str] = {}
         self._doubtful: dict[str, str] = {}
         self._unconfirmed: dict[str, str] = {}
+        # per shared class: blobs detected at keyframes, and those given a name (then or later)
+        self._blobs: dict[str, int] = {}
+        self._named_blobs: dict[str, int] = {}
 
     def start(self, run: RunInfo) -> None:
         self._run = run
@@ -95,7 +100,13 @@ class SummarySink:
             }
 
     def frame(self, frame: FrameRecord) -> None:
-        """Frames are not part of the summary."""
+        """Keyframes count the blobs of each shared class (frames are not in the summary)."""
+        if frame.keyframe is None or self._run is None:
+            return
+        for label, names in shared_classes(self._run.session.landmarks).items():
+            detection = frame.detections.get(names[0])  # one detection carries the class's blobs
+            if detection is not None:
+                self._blobs[label] = self._blobs.get(label, 0) + len(detection.blobs)
 
     def movement(self, record: MovementRecord) -> None:
         assert self._run is not None
@@ -134,6 +145,12 @@ class SummarySink:
             entry["not_visible"] = dict(record.not_visible)
         if record.named_landmarks:
             entry["named_landmarks"] = list(record.named_landmarks)
+        given = [(n, sum(b is not None for b in pair)) for n, pair in record.bearings_rad.items()]
+        given += [(n, len(rays)) for n, rays in record.named_from.items()]
+        for name, count in given:
+            label = class_of_name(name)
+            if label is not None:
+                self._named_blobs[label] = self._named_blobs.get(label, 0) + count
         if record.named_from:
             entry["named_from"] = {
                 name: [
@@ -204,6 +221,13 @@ class SummarySink:
             "named": named,
             "catalog_count": {label: len(v) for label, v in shared.items()},
             "movements_with_unresolved": unresolved,
+            "detections": {
+                label: {
+                    "at_keyframes": self._blobs.get(label, 0),
+                    "named": self._named_blobs.get(label, 0),
+                }
+                for label in shared
+            },
         }
         if self._doubtful:
             self.document["association"]["doubtful"] = dict(sorted(self._doubtful.items()))

@@ -67,6 +67,19 @@ def test_alike_landmarks_are_named_by_association(alike: tuple[dict[str, Any], s
         assert "L3" not in move["bearings_deg"] and "L4" not in move["bearings_deg"]
         assert set(move["landmarks"]) <= {"L5", "blue#1", "blue#2"}
     assert "alike landmarks named: blue 2/2" in output
+    # every blob of the class at a keyframe is counted, and those given a name, then or later
+    counts = assoc["detections"]["blue"]
+    blobs = sum(
+        b is not None
+        for move in doc["movements"]
+        for n, pair in move["bearings_deg"].items()
+        if n.startswith("blue#")
+        for b in pair
+    ) + sum(len(r) for move in doc["movements"] for r in move.get("named_from", {}).values())
+    assert counts["named"] == blobs
+    assert 0.5 * counts["at_keyframes"] <= counts["named"] <= counts["at_keyframes"]
+    share = round(100 * counts["named"] / counts["at_keyframes"])
+    assert f"blue 2/2, {share} % of {counts['at_keyframes']} detections" in output
 
 
 def test_what_association_leaves_open_is_reported(alike: tuple[dict[str, Any], str]) -> None:
