@@ -198,6 +198,9 @@ class JointSlam:
         self._undetermined: dict[int, tuple[_Seen, NDArray[np.float64], NDArray[np.bool_]]] = {}
         self._estimates: dict[str, LandmarkEstimate] = {}
         # bearing_scatter of the map as it is (None: not computed since it last changed)
+        self._residual_memo: (
+            tuple[gtsam.Values, tuple[int, int, int], list[g.Bearing], NDArray[np.float64]] | None
+        ) = None
         self._scatter: dict[str, tuple[int, float]] | None = None
         self.noise: NoiseEstimate | None = None
         self.reinitializations = 0
@@ -764,6 +767,22 @@ class JointSlam:
 
     # ------------------------------------------------------------------ checks
     def _residuals(self) -> tuple[list[g.Bearing], NDArray[np.float64]]:
+        """Every bearing of the map (:meth:`_bearings`) and its residual (rad) under the
+        current values; kept until the values are replaced or the bearings change."""
+        sig = (
+            len(self._placed),
+            len(self._in_graph),
+            sum(len(self._placed[k].bearings) for k in self._placed),
+        )
+        memo = self._residual_memo
+        if memo is not None and memo[0] is self._values and memo[1] == sig:
+            return memo[2], memo[3]
+        used, r = self._compute_residuals()
+        r.setflags(write=False)  # shared by the callers until the map changes
+        self._residual_memo = (self._values, sig, used, r)  # holds the values: no id reuse
+        return used, r
+
+    def _compute_residuals(self) -> tuple[list[g.Bearing], NDArray[np.float64]]:
         used = self._bearings()
         if not used:
             return used, np.zeros(0)
