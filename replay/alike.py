@@ -76,13 +76,11 @@ class AlikeLandmarks:
         pose = None
         if result.status == "ok" and result.o1_fl is not None and result.o2_fl is not None:
             pose = pose_between(result.o1_fl, result.o2_fl)
-        keyframes = getattr(estimator, "keyframes_fl", None)
+        used = getattr(estimator, "used_movements", None)
+        path = getattr(estimator, "trajectory_fl", None)
         trajectory = (
-            {
-                k: pose_between(o1, o2)
-                for k, (o1, o2) in keyframes(self.associator.movements_in_use()).items()
-            }
-            if keyframes is not None
+            {k: pose_between(o1, o2) for k, (o1, o2) in zip(used, path, strict=True)}
+            if used is not None and path is not None
             else None
         )
         scatter = getattr(estimator, "bearing_scatter", None)

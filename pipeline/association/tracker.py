@@ -211,17 +211,6 @@ class Associator:
         """Every name a landmark of a shared class may get, class by class (``red#1`` ...)."""
         return [slot_name(c, k + 1) for c, n in self.capacity.items() for k in range(n)]
 
-    def movements_in_use(self) -> set[int]:
-        """The movements whose placement :meth:`hypothesize` may read: those of the rays kept
-        (hypotheses, named landmarks not mapped yet, detections no name took) and of the
-        keyframes whose detections are remembered."""
-        rays = [r for hyps in self.hypotheses.values() for h in hyps for r in h.rays]
-        rays += [r for h in self.unmapped.values() for r in h.rays]
-        out = {r.movement for r in rays}
-        out.update(u[0] for kept in self._unnamed.values() for u in kept)
-        out.update(k for k, _ in self._seen_at)
-        return out
-
     # ------------------------------------------------------------------ placement
     def _place(
         self,
@@ -377,13 +366,12 @@ class Associator:
 
         ``pose`` is the movement as the estimator placed it (None: not placed; then the
         association's own placement is used, if any), ``mapped`` the estimator's map after it,
-        ``trajectory`` the estimator's current placement of earlier movements (index -> pose;
-        those of :meth:`movements_in_use` suffice): rays kept from them are placed anew (early
-        placements, from few landmarks, are rough). ``scatter`` is how widely each mapped
-        name's bearings scatter about it (:attr:`pipeline.joint.JointSlam.bearing_scatter`; a
-        name that scatters too widely is doubtful). Landmarks named now are in
-        ``out.confirmed`` and their bearings in ``out.history``; the doubtful and unconfirmed
-        names are reported anew.
+        ``trajectory`` the estimator's current placement of earlier movements (index -> pose):
+        rays kept from them are placed anew (early placements, from few landmarks, are
+        rough). ``scatter`` is how widely each mapped name's bearings scatter about it
+        (:attr:`pipeline.joint.JointSlam.bearing_scatter`; a name that scatters too widely is
+        doubtful). Landmarks named now are in ``out.confirmed`` and their bearings in
+        ``out.history``; the doubtful and unconfirmed names are reported anew.
         """
         for named, support in self.support.items():
             support.scatter = (scatter or {}).get(named)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import gtsam
@@ -284,17 +284,6 @@ class JointSlam:
         for k in sorted(self._placed):
             mp = self._movement_pose(k)
             out.append((mp.o1_fl[None, :], mp.o2_fl[None, :]))
-        return out
-
-    def keyframes_fl(
-        self, movements: Iterable[int]
-    ) -> dict[int, tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """O1 and O2 as (1, 2) arrays in FL of those of ``movements`` in the graph (the
-        others are left out): :attr:`trajectory_fl` for a few movements."""
-        out = {}
-        for k in sorted(set(movements) & self._placed.keys()):
-            mp = self._movement_pose(k)
-            out[k] = (mp.o1_fl[None, :], mp.o2_fl[None, :])
         return out
 
     # ------------------------------------------------------------------ placement

@@ -118,9 +118,8 @@ def run_synthetic(
         pose = None
         if res.status == "ok" and res.o1_fl is not None and res.o2_fl is not None:
             pose = pose_between(res.o1_fl, res.o2_fl)
-        wanted = assoc.movements_in_use()
-        keyframes = slam.keyframes_fl(wanted).items()  # type: ignore[attr-defined]
-        trajectory = {k: pose_between(*ends) for k, ends in keyframes}
+        path = zip(slam.used_movements, slam.trajectory_fl, strict=True)  # type: ignore[attr-defined]
+        trajectory = {k: pose_between(*ends) for k, ends in path}
         t_assoc = time.perf_counter()
         assoc.hypothesize(a, pose, slam.estimates, trajectory, slam.bearing_scatter)  # type: ignore[attr-defined]
         out.association_seconds += time.perf_counter() - t_assoc

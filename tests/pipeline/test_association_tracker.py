@@ -3,7 +3,6 @@ invented, the catalog count respected, hidden landmarks reported as not visible.
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from alike_synthetic import run_synthetic
 
@@ -119,19 +118,3 @@ def test_without_the_search_such_landmarks_stay_unnamed(monkeypatch: pytest.Monk
     run = run_synthetic(8, SEEDS[0], capacity=9)
     assert not run.estimates_fl
     assert any("blue unexplained" in r.unresolved for r in run.results)
-
-
-@pytest.mark.parametrize("seed", [4, 13])
-def test_the_trajectory_of_the_movements_in_use_suffices(
-    seed: int, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    # the estimator hands the associator the placement of the movements it may read
-    # (Associator.movements_in_use), not the whole trajectory each movement: the same run
-    # with every movement handed over names the same detections and maps the same points
-    lean = run_synthetic(8, seed)
-    monkeypatch.setattr(tracker.Associator, "movements_in_use", lambda self: set(range(10_000)))
-    full = run_synthetic(8, seed)
-    assert lean.given == full.given
-    assert lean.estimates_fl.keys() == full.estimates_fl.keys()
-    for name, point in lean.estimates_fl.items():
-        assert np.array_equal(point, full.estimates_fl[name])
