@@ -197,11 +197,10 @@ class JointSlam:
         # movements the bearings did not determine: what they saw, where the fit put them
         self._undetermined: dict[int, tuple[_Seen, NDArray[np.float64], NDArray[np.bool_]]] = {}
         self._estimates: dict[str, LandmarkEstimate] = {}
-        # bearing_scatter of the map as it is (None: not computed since it last changed)
+        # the residuals of the map as it is (see _residuals)
         self._residual_memo: (
             tuple[gtsam.Values, tuple[int, int, int], list[g.Bearing], NDArray[np.float64]] | None
         ) = None
-        self._scatter: dict[str, tuple[int, float]] | None = None
         self.noise: NoiseEstimate | None = None
         self.reinitializations = 0
         self._isam = self._new_isam()
@@ -251,9 +250,7 @@ class JointSlam:
         rays meet at one point; well above for bearings of several landmarks given one name."""
         if self.noise is None:
             return {}
-        if self._scatter is None:
-            self._scatter = self._scatter_of(*self._residuals())
-        return dict(self._scatter)
+        return self._scatter_of(*self._residuals())
 
     def _scatter_of(
         self, used: Sequence[g.Bearing], r: NDArray[np.float64]
@@ -837,16 +834,15 @@ class JointSlam:
         return ""
 
     def _update_estimates(self) -> None:
-        used, r = self._residuals()
+        _, r = self._residuals()
         self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
         n = self.noise
         off = abs(math.log(n.sigma_rad / self.sigma_model_rad))
         if n.dof >= RETUNE_DOF and off > math.log(RETUNE_RATIO):
             self.sigma_model_rad = n.sigma_rad
             self._rebuild(self._values)
-            used, r = self._residuals()
+            _, r = self._residuals()
             self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
-        self._scatter = self._scatter_of(used, r)
         scale = (self.noise.sigma_rad / self.sigma_model_rad) ** 2
         out = {}
         for name in sorted(self._in_graph - set(self.reference), key=self._lm_index.__getitem__):
@@ -859,7 +855,6 @@ class JointSlam:
         association step found its name wrong); :meth:`add_history` may give it again."""
         if name in self.reference or name not in self._lm_index:
             return
-        self._scatter = None
         for m in (*self._placed.values(), *self._waiting.values()):
             m.bearings[:] = [b for b in m.bearings if b.landmark != name]
         self._pending.pop(name, None)
@@ -913,7 +908,6 @@ class JointSlam:
         )
 
     def _process_movement(self, obs: MovementObservation) -> JointMovementResult:
-        self._scatter = None
         mapped = self._in_graph - set(self.reference)
         p = self.paper.process_movement(self._initializing(obs, mapped))
         res = JointMovementResult(
