@@ -62,6 +62,7 @@ from pipeline.association.support import Outcome, Support
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.joint.geometry import MovementPose, Sightings, pose_params, resect
+from pipeline.joint.noise import robust_std
 
 #: A hypothesis missing from this many keyframes where it was predicted is dropped.
 MAX_MISSES = 2
@@ -239,14 +240,14 @@ class Associator:
             if chained is not None:
                 pose = chained[0]
                 r = s.residuals(pose_params(pose))
-                if 1.4826 * float(np.median(np.abs(r))) <= PLACEMENT_MAX_EPS * self.eps_rad:
+                if robust_std(r) <= PLACEMENT_MAX_EPS * self.eps_rad:
                     return chained
         if n1 + n2 < 4:
             return few
         found = resect(s, guesses=[])
         if found is None:
             return "cannot be placed"
-        robust = 1.4826 * float(np.median(np.abs(found.residuals_rad)))
+        robust = robust_std(found.residuals_rad)
         if robust > PLACEMENT_MAX_EPS * self.eps_rad or not math.isfinite(found.position_std_fl):
             return f"placement does not fit the map (robust residual {_deg(robust)})"
         return found.pose, found.position_std_fl * self.sigma_rad

@@ -40,7 +40,7 @@ from pipeline.joint.geometry import (
     predicted_bearings,
     resect,
 )
-from pipeline.joint.noise import NoiseEstimate, estimate_noise
+from pipeline.joint.noise import NoiseEstimate, estimate_noise, robust_std
 from pipeline.joint.result import JointMovementResult
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation
@@ -262,7 +262,7 @@ class JointSlam:
             if b.landmark not in self.reference:
                 by.setdefault(b.landmark, []).append(float(x))
         sigma = max(self.noise.sigma_rad, 1e-12)
-        return {n: (len(v), 1.4826 * float(np.median(v)) / sigma) for n, v in by.items()}
+        return {n: (len(v), robust_std(np.array(v)) / sigma) for n, v in by.items()}
 
     @property
     def used_movements(self) -> list[int]:
@@ -356,7 +356,7 @@ class JointSlam:
         )
         if found is None:
             return "no bearing of a mapped landmark at O1"
-        robust = 1.4826 * float(np.median(np.abs(found.residuals_rad)))
+        robust = robust_std(found.residuals_rad)
         if robust > RESECTION_MAX_EPS * self.eps_rad:
             return (
                 f"resection does not fit the map (robust residual {math.degrees(robust):.2f} "
@@ -632,7 +632,7 @@ class JointSlam:
         if solved is not None:
             self._values = solved
             _, r = self._residuals()
-            robust = 1.4826 * float(np.median(np.abs(r))) if r.size else 0.0
+            robust = robust_std(r) if r.size else 0.0
             why = (
                 f"bootstrap does not fit (robust residual {math.degrees(robust):.2f} deg > eps)"
                 if robust > self.eps_rad

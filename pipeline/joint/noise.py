@@ -23,6 +23,12 @@ OUTLIER_K = 4.0
 FLOOR_RAD = math.radians(0.02)
 
 
+def robust_std(residuals_rad: NDArray[np.float64]) -> float:
+    """Robust standard deviation of residuals (k,): 1.4826 x their median absolute value (the
+    std of a Gaussian with that median; wrong detections barely move it)."""
+    return 1.4826 * float(np.median(np.abs(residuals_rad)))
+
+
 @dataclass(frozen=True)
 class NoiseEstimate:
     """Bearing noise estimated from the residuals of a map.
@@ -58,7 +64,7 @@ def estimate_noise(
     r = np.asarray(residuals_rad, np.float64)
     if r.size == 0:
         return NoiseEstimate(sigma0_rad, 0.0, 0.0, 0, 0, -n_params)
-    robust = max(1.4826 * float(np.median(np.abs(r))), FLOOR_RAD)
+    robust = max(robust_std(r), FLOOR_RAD)
     inlier = np.abs(r) <= OUTLIER_K * max(robust, sigma0_rad * 0.25)
     ssr = float((r[inlier] ** 2).sum())
     dof = int(inlier.sum()) - n_params

@@ -8,7 +8,9 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from alike_synthetic import run_synthetic
 
+import pipeline.joint.estimator as joint_estimator
 from data_schemas.errors import EstimationError
 from pipeline.batch_ls import batch_least_squares
 from pipeline.estimators import make_estimator
@@ -455,14 +457,6 @@ def test_an_undetermined_movement_is_not_resected_again_for_nothing(
     """Look-alike runs leave movements the map does not determine waiting; while they see the
     same mapped landmarks they are judged at their last fit instead of being resected again,
     which changes no result."""
-    import sys
-    from pathlib import Path
-
-    import pipeline.joint.estimator as joint_estimator
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from alike_synthetic import run_synthetic
-
     calls = [0]
     real = joint_estimator.resect
 
