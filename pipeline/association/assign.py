@@ -7,10 +7,17 @@ one landmark and one detection is a match; in a larger group the best one-to-one
 (scipy's ``linear_sum_assignment``; leaving a landmark or a detection alone costs ``gate``) is
 kept only for pairs whose every alternative costs at least ``margin`` more; the rest of the
 group is contested (reported, never used).
+
+Occlusion: when the predicted distances are given, a group of landmarks that all gate a single
+detection, none of them sure, and are predicted in line (within ``in_line_rad`` of one bearing)
+is seen along that bearing. Only the nearest can show there, so when one is clearly the
+nearest (:data:`NEAR_RATIO`, :data:`NEAR_SIGMAS`) it takes the detection and the others are
+hidden behind it.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,6 +29,11 @@ from data_schemas.angles import wrap_rad
 GATE_CHI2 = 10.83
 #: A pairing is unique when every alternative assignment costs this much more (chi-square units).
 MARGIN_CHI2 = 9.0
+#: Occlusion: the nearest landmark of a group takes its one detection when it is at most this
+#: share of the next one's distance...
+NEAR_RATIO = 0.8
+#: ... and nearer by this many stds of the two distances' difference.
+NEAR_SIGMAS = 3.0
 _BIG = 1e9
 
 
@@ -39,6 +51,8 @@ class Assignment:
         Detections no landmark explains (candidates for new landmarks).
     contested_landmarks, contested_detections : list of int
         Landmarks and detections of groups the assignment could not resolve.
+    hidden : list of (int, int)
+        ``(landmark, landmark in front of it)``: landmarks hidden behind a nearer one.
     d2 : (n, m) float
         The Mahalanobis costs.
     """
@@ -48,6 +62,7 @@ class Assignment:
     unexplained: list[int] = field(default_factory=list)
     contested_landmarks: list[int] = field(default_factory=list)
     contested_detections: list[int] = field(default_factory=list)
+    hidden: list[tuple[int, int]] = field(default_factory=list)
     d2: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
 
 
@@ -92,6 +107,19 @@ def _groups(plausible: NDArray[np.bool_]) -> list[tuple[list[int], list[int]]]:
     return out
 
 
+def _in_front(range_fl: NDArray[np.float64], range_std_fl: NDArray[np.float64]) -> int | None:
+    """Index of the landmark clearly nearer than every other one (None: none is)."""
+    if range_fl.size < 2 or not np.all(np.isfinite(range_fl)):
+        return None
+    a, b = (int(i) for i in np.argsort(range_fl)[:2])
+    gap = range_fl[b] - range_fl[a]
+    if range_fl[a] > NEAR_RATIO * range_fl[b] or gap < NEAR_SIGMAS * math.hypot(
+        range_std_fl[a], range_std_fl[b]
+    ):
+        return None
+    return a
+
+
 def assign(
     pred_rad: NDArray[np.float64],
     pred_std_rad: NDArray[np.float64],
@@ -99,14 +127,22 @@ def assign(
     *,
     gate: float = GATE_CHI2,
     margin: float = MARGIN_CHI2,
+    range_fl: NDArray[np.float64] | None = None,
+    range_std_fl: NDArray[np.float64] | None = None,
+    in_line_rad: float = 0.0,
 ) -> Assignment:
     """Assign detections (m,) to predicted bearings (n,) with stds (n,), one-to-one.
+
+    ``range_fl`` and ``range_std_fl`` (n,) are the landmarks' predicted distances and their
+    stds (FL; NaN: not known well enough to judge occlusion); without them no landmark hides
+    another. Landmarks are in line when their predicted bearings are within ``in_line_rad``
+    of the nearest one's.
 
     Returns
     -------
     Assignment
-        Matches, landmarks with no plausible detection, detections no landmark explains, and
-        the contested rest.
+        Matches, landmarks with no plausible detection, detections no landmark explains,
+        landmarks hidden behind a nearer one, and the contested rest.
     """
     pred = np.asarray(pred_rad, np.float64).reshape(-1)
     std = np.maximum(np.asarray(pred_std_rad, np.float64).reshape(-1), 1e-9)
@@ -130,6 +166,13 @@ def assign(
                 alt[i, j] = _BIG
                 if _solve(alt, gate)[0] - best >= margin:
                     sure.append((i, j))
+            if not sure and len(dets) == 1 and range_fl is not None and range_std_fl is not None:
+                front = _in_front(np.asarray(range_fl)[lms], np.asarray(range_std_fl)[lms])
+                off_line = np.abs(wrap_rad(pred[lms] - pred[lms[front or 0]]))
+                if front is not None and float(off_line.max()) <= in_line_rad:
+                    out.pairs.append((lms[front], dets[0]))
+                    out.hidden.extend((k, lms[front]) for k in lms if k != lms[front])
+                    continue
             out.pairs.extend((lms[i], dets[j]) for i, j in sure)
             out.contested_landmarks.extend(
                 lms[i] for i in range(len(lms)) if i not in {p[0] for p in sure}
@@ -138,4 +181,5 @@ def assign(
                 dets[j] for j in range(len(dets)) if j not in {p[1] for p in sure}
             )
     out.pairs.sort()
+    out.hidden.sort()
     return out

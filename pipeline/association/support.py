@@ -24,9 +24,11 @@ from dataclasses import dataclass
 from typing import Literal
 
 #: What became of one prediction at one keyframe: the landmark got a detection ("seen"), none
-#: was in its gate ("missed"), several landmarks or detections were ("contested"), or the
-#: prediction was too uncertain to gate anything ("vague").
-Outcome = Literal["seen", "missed", "contested", "vague"]
+#: was in its gate ("missed"), several landmarks or detections were ("contested"), the
+#: prediction was too uncertain to gate anything ("vague"), or a nearer landmark in line with
+#: it took the one detection in its gate ("hidden": not a test of the name, not counted as
+#: predicted).
+Outcome = Literal["seen", "missed", "contested", "vague", "hidden"]
 
 #: A name is doubtful once it has been predicted at this many keyframes since it was named...
 DOUBT_MIN_PREDICTIONS = 6
@@ -57,7 +59,7 @@ class Support:
     ----------
     named_at : int
         The movement that named it (its own keyframes are not counted: they named it).
-    seen, missed, contested, vague : int
+    seen, missed, contested, vague, hidden : int
         Keyframes since then where its prediction had that outcome.
     scatter : (int, float) or None
         Its bearings in the map and how widely they scatter about it (the estimator's
@@ -69,12 +71,18 @@ class Support:
     missed: int = 0
     contested: int = 0
     vague: int = 0
+    hidden: int = 0
     scatter: tuple[int, float] | None = None
 
     @property
     def predicted(self) -> int:
-        """Keyframes where it was predicted since it was named."""
+        """Keyframes where it was predicted since it was named (hidden ones aside)."""
         return self.seen + self.missed + self.contested + self.vague
+
+    @property
+    def confirmed(self) -> bool:
+        """Seen often enough since its naming to tell, and not doubtful."""
+        return self.seen >= CONFIRM_MIN_SEEN and self.doubt() is None
 
     def add(self, outcome: Outcome) -> None:
         """Count one prediction's outcome."""

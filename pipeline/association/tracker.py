@@ -8,7 +8,10 @@ For each movement (its two keyframes, O1 and O2):
    (:func:`pipeline.joint.geometry.resect`, four bearings at least).
 2. Per shared class, predict the bearing of each landmark already named (``red#1``, ...) from
    O1 and O2, with its std from the map covariance, the placement and the bearing noise, and
-   assign the class's detections (:func:`pipeline.association.assign.assign`).
+   assign the class's detections (:func:`pipeline.association.assign.assign`). Names in the
+   map and confirmed (:attr:`pipeline.association.support.Support.confirmed`) also give their
+   distances: of several predicted in line (within eps) on one blob, the one clearly in
+   front takes it and hides the others.
 3. Detections no named landmark explains, or that the assignment left contested, feed the
    hypotheses of the class: a hypothesis whose gate holds one detection gains that ray (if
    the rays still meet); one with none counts a miss. Pairs of detections still unexplained,
@@ -481,7 +484,15 @@ class Associator:
             sharp = np.flatnonzero(~vague)
             pred, std = pred[sharp], std[sharp]
             usable = [known[i] for i in sharp]
-            a = assign(pred, std, det)
+            range_fl, range_std_fl = self._ranges(usable, origins[end], pos_var, mapped)
+            a = assign(
+                pred,
+                std,
+                det,
+                range_fl=range_fl,
+                range_std_fl=range_std_fl,
+                in_line_rad=self.eps_rad,
+            )
             bmap = out.bearings_o1_rad if end == 0 else out.bearings_o2_rad
             for i, j in a.pairs:
                 bmap[usable[i][0]] = float(det[j])
@@ -492,6 +503,11 @@ class Associator:
                     f"predicted at {_deg(float(pred[i]))}, not detected (hidden or out of range)"
                 )
                 out.outcomes.setdefault(usable[i][0], []).append("missed")
+            for i, front in a.hidden:
+                out.not_visible[f"{usable[i][0]}@{where}"] = (
+                    f"predicted at {_deg(float(pred[i]))}, hidden behind {usable[front][0]}"
+                )
+                out.outcomes.setdefault(usable[i][0], []).append("hidden")
             for i in a.contested_landmarks:
                 out.outcomes.setdefault(usable[i][0], []).append("contested")
             if a.contested_landmarks or a.contested_detections:
@@ -499,6 +515,26 @@ class Associator:
             # contested detections may still be a landmark not named yet: hypotheses may take them
             free.append(sorted(a.unexplained + a.contested_detections))
         return free[0], free[1]
+
+    def _ranges(
+        self,
+        usable: Sequence[tuple[str, LandmarkEstimate]],
+        origin_fl: NDArray[np.float64],
+        pos_var: float,
+        mapped: Mapping[str, LandmarkEstimate],
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Distances (n,) of named landmarks from ``origin_fl`` and their stds (FL), NaN for
+        a name not trusted to hide others (not in the map, or not confirmed)."""
+        pts = np.array([e.mean_fl for _, e in usable]).reshape(-1, 2)
+        covs = np.array([e.cov_fl for _, e in usable]).reshape(-1, 2, 2)
+        v = pts - origin_fl
+        range_fl = np.linalg.norm(v, axis=1)
+        u = v / np.maximum(range_fl, 1e-12)[:, None]
+        range_std_fl = np.sqrt(np.einsum("ni,nij,nj->n", u, covs, u) + pos_var)
+        trusted = [
+            n in mapped and n in self.support and self.support[n].confirmed for n, _ in usable
+        ]
+        return np.where(trusted, range_fl, np.nan), range_std_fl
 
     def _ray(
         self, index: int, end: int, j: int, b: float, origin: NDArray[np.float64], heading: float

@@ -14,6 +14,7 @@ from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.estimators import make_estimator
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import simulate_bearings
+from recorder.sim.world import Arena, Landmark, SimWorld
 
 EPS = math.radians(3.0)
 ARENA_M = (1.6, 1.2)
@@ -30,6 +31,8 @@ class SyntheticRun:
     associator: Associator
     results: list[MovementAssociation] = field(default_factory=list)
     given: list[tuple[int, int, str, str]] = field(default_factory=list)  # move, end, name, true
+    #: per keyframe (movement, end), the landmarks hidden behind a nearer post
+    occluded_at: dict[tuple[int, int], set[str]] = field(default_factory=dict)
     estimates_fl: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     truth_fl: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     unit_m: float = 1.0
@@ -78,9 +81,18 @@ def layout(
 
 
 def run_synthetic(
-    n: int, seed: int, *, moves: int = 20, capacity: int | None = None, hide: Hide | None = None
+    n: int,
+    seed: int,
+    *,
+    moves: int = 20,
+    capacity: int | None = None,
+    hide: Hide | None = None,
+    post_radius_m: float = 0.0,
 ) -> SyntheticRun:
-    """``moves`` movements; the catalog says ``capacity`` (default ``n``) blue landmarks."""
+    """``moves`` movements; the catalog says ``capacity`` (default ``n``) blue landmarks.
+    With ``post_radius_m`` the landmarks are posts of that radius, and a post partly hidden
+    behind a nearer one (the simulator's geometry, ``SimWorld.occluded_fractions``) has no
+    blob: the nearer one's blob stands for both."""
     import time
 
     rng = np.random.default_rng(seed)
@@ -93,9 +105,24 @@ def run_synthetic(
         "joint", ["L1", "L2", *assoc.names], ("L1", "L2"), vision_error_rad=EPS, rng=rng
     )
     out = SyntheticRun(assoc, truth_fl=sim.truth_fl(("L1", "L2")), unit_m=math.dist(*REFERENCE_M))
+    posts = None
+    if post_radius_m > 0.0:
+        posts = SimWorld(
+            Arena(*ARENA_M),
+            tuple(Landmark(k, x, y, "blue", post_radius_m) for k, (x, y) in lms.items()),
+        )
     tick = time.perf_counter()
     for obs in sim.observations:
         ends = (obs.bearings_o1_rad, obs.bearings_o2_rad)
+        if posts is not None:
+            behind = []
+            for e, origin in enumerate((sim.o1_world[obs.index], sim.o2_world[obs.index])):
+                hidden = posts.occluded_fractions((float(origin[0]), float(origin[1]), 0.0)) > 0
+                behind.append({k for k, h in zip(posts.names, hidden, strict=True) if h})
+                out.occluded_at[obs.index, e] = behind[e]
+            ends = tuple(
+                {k: v for k, v in b.items() if k not in behind[e]} for e, b in enumerate(ends)
+            )
         unique = tuple(
             {k: v for k, v in b.items() if k[0] == "L" and not (hide and hide(obs.index, e, k))}
             for e, b in enumerate(ends)

@@ -1,4 +1,5 @@
-"""Gated one-to-one assignment: clear matches, refusals to guess, occlusion as "not visible"."""
+"""Gated one-to-one assignment: clear matches, refusals to guess, occlusion: the landmark
+clearly in front takes the blob, the ones behind are hidden."""
 
 from __future__ import annotations
 
@@ -38,6 +39,51 @@ def test_one_detection_between_two_overlapping_landmarks_is_not_given_to_either(
     a = assign(np.radians([40.0, 41.0]), np.full(2, 2.0 * DEG), np.radians([40.6]))
     assert a.pairs == []
     assert sorted(a.contested_landmarks) == [0, 1] and a.contested_detections == [0]
+
+
+def test_a_landmark_clearly_in_front_takes_the_one_blob_and_hides_those_behind() -> None:
+    # three landmarks in line along 40 deg, one blob: only the nearest can show there
+    a = assign(
+        np.radians([40.0, 41.0, 39.5]),
+        np.full(3, 2.0 * DEG),
+        np.radians([40.6]),
+        range_fl=np.array([1.5, 0.5, 0.9]),
+        range_std_fl=np.full(3, 0.05),
+        in_line_rad=3.0 * DEG,
+    )
+    assert a.pairs == [(1, 0)] and a.hidden == [(0, 1), (2, 1)]
+    assert not (a.contested_landmarks or a.contested_detections or a.missing)
+
+
+def test_occlusion_needs_a_clear_lead_in_distance_from_trusted_landmarks_in_line() -> None:
+    det = np.radians([40.6])
+    for pred_deg, std_deg, range_fl, range_std_fl in [
+        ([40.0, 41.0], 2.0, [0.5, 0.55], [0.01, 0.01]),  # nearly as far: either may be in front
+        ([40.0, 41.0], 2.0, [0.5, 1.0], [0.2, 0.2]),  # a lead (0.5) under 3 stds of it (0.28)
+        ([40.0, 41.0], 2.0, [0.5, math.nan], [0.01, 0.01]),  # one landmark not trusted to judge
+        ([38.0, 43.5], 3.0, [0.5, 1.5], [0.01, 0.01]),  # predicted 5.5 deg apart: not in line
+    ]:
+        a = assign(
+            np.radians(pred_deg),
+            np.full(2, std_deg * DEG),
+            det,
+            range_fl=np.array(range_fl),
+            range_std_fl=np.array(range_std_fl),
+            in_line_rad=3.0 * DEG,
+        )
+        assert a.pairs == [] and not a.hidden and sorted(a.contested_landmarks) == [0, 1]
+
+
+def test_distances_do_not_decide_between_two_blobs() -> None:
+    # two blobs, each in both gates: which landmark made which is not a matter of occlusion
+    a = assign(
+        np.radians([30.0, 31.0]),
+        np.full(2, 2.0 * DEG),
+        np.radians([29.5, 31.5]),
+        range_fl=np.array([0.5, 1.5]),
+        range_std_fl=np.full(2, 0.01),
+    )
+    assert a.pairs == [] and not a.hidden
 
 
 def test_missing_and_unexplained_are_reported_apart() -> None:
