@@ -667,6 +667,8 @@ class Associator:
             out.unconfirmed[name] = young
         out.confirmed.append(name)
         out.history[name] = [(r.movement, r.end, r.bearing_rad) for r in h.rays]
+        # its detections are no longer unnamed: the search must not give them a second name
+        self._unnamed[label] = [u for u in self._unnamed[label] if u[:3] not in h.keys]
         for r in h.rays:
             if r.movement == out.index:
                 out.names[label][r.end][r.detection] = name
@@ -730,7 +732,6 @@ class Associator:
         if seen < DISCOVER_SEEN_SHARE * predicted:
             return
         if self._give_name(label, h, lines, out):
-            self._unnamed[label] = [u for u in kept if u[:3] not in h.keys]
             self.hypotheses[label] = [o for o in self.hypotheses[label] if not o.keys & h.keys]
 
     def _predicted_seen(self, h: Hypothesis, since: int) -> tuple[int, int]:

@@ -62,8 +62,11 @@ def test_detections_are_associated_correctly(scored: Score) -> None:
     # correctly, or left unnamed and reported (never forced): at most 2 % named wrongly
     assert scored.wrong_share <= 0.02
     # not correct by naming nothing: most detections get their name, at their keyframe or with
-    # the name they led to (``named_from``; 91 % in this run, both cameras)
-    assert scored.n_correct >= 0.85 * scored.n_detections
+    # the name they led to (``named_from``). One run's share moves with the order in which
+    # its landmarks are named (this one, unwrapped: 91, 92 and 85 % over the last three
+    # versions), so the share is checked pooled over ten runs per camera
+    # (test_association_over_seeds); here, at least three in four
+    assert scored.n_correct >= 0.75 * scored.n_detections
     # among the named ones alone the share is lower (docs/RESULTS.md): a blob of a landmark
     # not yet named that lines up with a named one is taken for it
     assert scored.correct_share >= 0.9
@@ -106,15 +109,17 @@ def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
     # ten layouts per camera, failures included. Every run: no two names on one landmark, and
     # no more names than landmarks. Over the ten: at least 76 of the 80 landmarks named and at
     # most 2 names more than 10 cm off their landmark; the runs without such a name associate
-    # at least 97 % of their named bearings correctly, mean error <= 3 cm. Measured: 80
-    # (unwrapped) and 78 (omni) named; 2 names off in each, both in seed 3 (one found at
-    # movement 4 where rays of several landmarks meet, 28 cm off; one 47 cm off); 97.2-100 %
-    # correct. Before names were also searched for among the unnamed detections
+    # at least 97 % of their named bearings correctly, mean error <= 3 cm; and 85 % of all the
+    # detections of the ten are named correctly. Measured: 80 (unwrapped) and 79 (omni)
+    # named, 2 names off in each, 86.2 and 86.6 % of the detections named correctly. Before
+    # names were also searched for among the unnamed detections
     # (docs/RESULTS.md): 74 and 79 named and no name off on these ten seeds, but more than
     # twice the names off on seeds 161-260, which neither rule was written on.
-    named = off = 0
+    named = off = correct = detections = 0
     for seed in range(1, 11):
         _, s = _simulated(camera, seed, tmp_path)
+        correct += s.n_correct
+        detections += s.n_detections
         assert len(set(s.matched.values())) == s.n_named <= 8, seed
         wrong = [e for e in s.errors_m.values() if e > 0.10]
         off += len(wrong)
@@ -124,16 +129,18 @@ def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
         named += s.n_named
     assert named >= 76, named
     assert off <= 2, off
+    # most detections get their right name, at their keyframe or with the name they led to
+    assert correct >= 0.85 * detections, (correct, detections)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 13), ("omni", 31)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 185), ("omni", 187)])
 def test_a_doubtful_name_is_retracted_for_a_landmark_the_full_catalog_kept_out(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
     # layouts where a name given early is seen at few of its predictions (found on seeds
-    # 1-160): blue#4 of unwrapped 13 (named with movement 4, seen at 5 of 16) and blue#5 of
-    # omni 31 (movement 5, 6 of 24) become doubtful, and once every name is given and a real
+    # 161-420): blue#4 of unwrapped 185 (named with movement 4, seen at 3 of 14) and blue#6 of
+    # omni 187 (movement 6, 3 of 12) become doubtful, and once every name is given and a real
     # landmark is confirmed, the most doubtful name goes to it: the final map has all 8 on
     # their landmarks
     _, s = _simulated(camera, seed, tmp_path)
@@ -151,12 +158,12 @@ def test_a_doubtful_name_is_retracted_for_a_landmark_the_full_catalog_kept_out(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 213), ("omni", 220)])
+@pytest.mark.parametrize(("camera", "seed"), [("unwrapped", 213), ("omni", 213)])
 def test_names_off_their_landmark_are_reported_doubtful(
     camera: str, seed: int, tmp_path: Path
 ) -> None:
-    # layouts where a name given to rays of several landmarks stays (blue#5 of unwrapped 213,
-    # 31 cm off, seen at 13 of 26 predictions and missed at 6; blue#3 of omni 220, 86 cm off):
+    # a layout where a name given to rays of several landmarks stays (blue#5 of unwrapped 213
+    # and blue#6 of omni 213, 31 cm off, each seen at 13 of 26 predictions):
     # seen too rarely where the map predicts it, it is reported as doubtful in the summary,
     # its result line and Rerun; the names on real landmarks are not
     from replay.process import result_line
