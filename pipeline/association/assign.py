@@ -120,6 +120,11 @@ def _in_front(range_fl: NDArray[np.float64], range_std_fl: NDArray[np.float64]) 
     return a
 
 
+def _in_line(pred_rad: NDArray[np.float64], front: int, tol_rad: float) -> bool:
+    """Whether every predicted bearing is within ``tol_rad`` of the one in front's."""
+    return float(np.abs(wrap_rad(pred_rad - pred_rad[front])).max()) <= tol_rad
+
+
 def assign(
     pred_rad: NDArray[np.float64],
     pred_std_rad: NDArray[np.float64],
@@ -168,8 +173,7 @@ def assign(
                     sure.append((i, j))
             if not sure and len(dets) == 1 and range_fl is not None and range_std_fl is not None:
                 front = _in_front(np.asarray(range_fl)[lms], np.asarray(range_std_fl)[lms])
-                off_line = np.abs(wrap_rad(pred[lms] - pred[lms[front or 0]]))
-                if front is not None and float(off_line.max()) <= in_line_rad:
+                if front is not None and _in_line(pred[lms], front, in_line_rad):
                     out.pairs.append((lms[front], dets[0]))
                     out.hidden.extend((k, lms[front]) for k in lms if k != lms[front])
                     continue
