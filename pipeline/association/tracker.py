@@ -30,11 +30,12 @@ For each movement (its two keyframes, O1 and O2):
    hypotheses kept disputing or swallowing), that point is named too.
 
 5. What became of each named landmark's predictions since it was named (seen, missed,
-   contested, too uncertain) is counted (:mod:`pipeline.association.support`); a name seen too
-   rarely, or whose bearings in the joint map scatter too widely about it, is reported as
-   doubtful every movement while it stays so, a name not seen often
-   enough since its naming to tell as unconfirmed. When the class's catalog is full and a
-   hypothesis is confirmed, the most doubtful name is retracted and given to it.
+   contested, too uncertain; hidden behind a nearer one is not a test) is counted
+   (:mod:`pipeline.association.support`); a name seen too rarely, or whose bearings in the
+   joint map scatter too widely about it, is reported as doubtful every movement while it
+   stays so, a name not seen often enough since its naming to tell as unconfirmed. When the
+   class's catalog is full and a hypothesis is confirmed, the most doubtful name is retracted
+   and given to it.
 
 Whatever is left unresolved (contested detections, unexplained detections, a class beyond its
 catalog count, a movement that cannot be placed, a doubtful name) is reported in the movement's
