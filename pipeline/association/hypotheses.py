@@ -43,6 +43,23 @@ class Hypothesis:
     misses: int = 0
     born: int = 0
     keys: set[tuple[int, int, int]] = field(default_factory=set)
+    _lines: dict[tuple[float, int], int] = field(default_factory=dict, repr=False, compare=False)
+
+    def lines_of_sight(self, min_rad: float) -> int:
+        """Distinct lines of sight: keyframes whose lines through the point (modulo pi: a
+        keyframe behind the point lies on the same line) differ by more than ``min_rad``.
+        Keyframes on one line of sight test nothing: any point of the line fits them all.
+        Kept per ``min_rad`` and number of rays (a named landmark's rays grow in place)."""
+        key = (min_rad, len(self.rays))
+        if (known := self._lines.get(key)) is None:
+            d = np.array([r.origin_fl for r in self.rays]) - self.point_fl
+            ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), math.pi)
+            kept: list[float] = []
+            for a in ang:
+                if all(abs(math.sin(a - k)) > math.sin(min_rad) for k in kept):
+                    kept.append(float(a))
+            known = self._lines[key] = len(kept)
+        return known
 
     @property
     def movements(self) -> set[int]:

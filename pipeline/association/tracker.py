@@ -588,7 +588,7 @@ class Associator:
                         grown.append(h)
                 else:
                     grown.append(h)  # several detections in its gate: wait for a clearer view
-            grown.sort(key=lambda h: (-_lines_of_sight(h, self._distinct), h.rms_rad))
+            grown.sort(key=lambda h: (-h.lines_of_sight(self._distinct), h.rms_rad))
             hyps = grown[:MAX_HYPOTHESES]
         self.hypotheses[label] = hyps
         return [[j for j in free[end] if j not in used[end]] for end in (0, 1)]
@@ -622,7 +622,7 @@ class Associator:
         estimates = [e for _, e in named]
         kept = [h for h in self.hypotheses[label] if not self._same(h, *estimates)]
         self.hypotheses[label] = kept
-        lines = {id(h): _lines_of_sight(h, self._distinct) for h in self.hypotheses[label]}
+        lines = {id(h): h.lines_of_sight(self._distinct) for h in self.hypotheses[label]}
         ready = [
             h
             for h in self.hypotheses[label]
@@ -723,7 +723,7 @@ class Associator:
                 return
             point = h.point_fl
         assert h is not None
-        lines = _lines_of_sight(h, self._distinct)
+        lines = h.lines_of_sight(self._distinct)
         if lines < DISCOVER_LINES or len(h.movements) < DISCOVER_MOVEMENTS:
             return
         for _, e in self._known(label, mapped):
@@ -793,13 +793,24 @@ class Associator:
 
     def _replace(self, trajectory: Mapping[int, MovementPose]) -> None:
         """Place the rays of hypotheses and unmapped named landmarks on ``trajectory``."""
+        ends = {
+            (k, end): ((float(o[0]), float(o[1])), p.heading_rad)
+            for k, p in trajectory.items()
+            for end, o in enumerate((p.o1_fl, p.o2_fl))
+        }
+        stays: dict[int, bool] = {}  # id(ray) -> whether its new placement is close to it
+
+        def still(r: Ray) -> bool:
+            if (known := stays.get(id(r))) is None:
+                at = ends.get((r.movement, r.end))
+                known = at is None or _close_to(r, at[0], at[1] + r.bearing_rad, self.sigma_rad)
+                stays[id(r)] = known
+            return known
 
         def moved(h: Hypothesis) -> Hypothesis | None:
-            if not any(r.movement in trajectory for r in h.rays):
+            if all(still(r) for r in h.rays):
                 return h
             rays = [_on(r, trajectory.get(r.movement)) for r in h.rays]
-            if all(_close(a, b, self.sigma_rad) for a, b in zip(rays, h.rays, strict=True)):
-                return h
             refit = fit(h.label, rays, self.eps_rad, self.sigma_rad, h.point_fl)
             if refit is not None:
                 refit.misses, refit.born = h.misses, h.born
@@ -838,12 +849,14 @@ def pose_between(o1_fl: NDArray[np.float64], o2_fl: NDArray[np.float64]) -> Move
     return MovementPose(o1, math.atan2(d[1], d[0]), max(float(np.hypot(*d)), 1e-6))
 
 
-def _close(a: Ray, b: Ray, sigma_rad: float) -> bool:
-    """Whether two placements of one ray differ by less than :data:`MOVED_FL` and a tenth of
-    ``sigma_rad``."""
+def _close_to(
+    ray: Ray, origin_fl: tuple[float, float], direction_rad: float, sigma_rad: float
+) -> bool:
+    """Whether ``ray`` placed anew at ``origin_fl`` along ``direction_rad`` moves less than
+    :data:`MOVED_FL` and turns less than a tenth of ``sigma_rad``."""
     return (
-        math.dist(a.origin_fl, b.origin_fl) < MOVED_FL
-        and abs(a.direction_rad - b.direction_rad) < 0.1 * sigma_rad
+        math.dist(origin_fl, ray.origin_fl) < MOVED_FL
+        and abs(direction_rad - ray.direction_rad) < 0.1 * sigma_rad
     )
 
 
@@ -936,20 +949,6 @@ def _crossings(rs: _RaySet, index: int, min_parallax_rad: float) -> NDArray[np.f
     ia, ib = np.nonzero((t1 > 0.0) & (t2 > 0.0) & (parallax >= min_parallax_rad))
     out: NDArray[np.float64] = rs.origins_fl[a][ia] + t1[ia, ib][:, None] * rs.units[a][ia]
     return out
-
-
-def _lines_of_sight(h: Hypothesis, min_rad: float) -> int:
-    """Distinct lines of sight of a hypothesis: keyframes whose lines through its point (modulo
-    pi: a keyframe behind the point lies on the same line) differ by more than
-    ``min_rad``. Keyframes on one line of sight test nothing: any point of the
-    line fits them all."""
-    d = np.array([r.origin_fl for r in h.rays]) - h.point_fl
-    ang = np.mod(np.arctan2(d[:, 1], d[:, 0]), math.pi)
-    kept: list[float] = []
-    for a in ang:
-        if all(abs(math.sin(a - k)) > math.sin(min_rad) for k in kept):
-            kept.append(float(a))
-    return len(kept)
 
 
 def _rivals(o: Hypothesis, h: Hypothesis, po: int, ph: int) -> bool:
