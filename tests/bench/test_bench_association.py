@@ -5,13 +5,15 @@ goals on the real simulator (not in the default run: ``pytest tests/bench``).
 (no images) with 4, 8, 16 and 32 identical landmarks and a distinct reference pair, and the
 time spent in association alone (``Associator.associate`` and ``hypothesize``); the
 yardstick (the same run with every landmark of its own class, so no association) is measured
-in the same run, alternated. ``test_association_goals``: 8 identical landmarks, 10 seeds per
-camera model, scored like ``tests/replay/test_association_sim.py``; the figures are printed
-and kept in ``extra_info`` (docs/RESULTS.md).
+in the same run, alternated; and what each landmark added between consecutive sizes costs per
+movement. ``test_association_goals``: 8 identical landmarks, 10 seeds per camera model, scored
+like ``tests/replay/test_association_sim.py``; the figures are printed and kept in
+``extra_info`` (docs/RESULTS.md).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import sys
 import time
@@ -19,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pytest
 
 from pipeline.estimators import make_estimator
 from pipeline.synthetic import simulate_bearings
@@ -47,30 +48,47 @@ def _yardstick(n: int, seed: int) -> float:
     return time.perf_counter() - tick
 
 
-@pytest.mark.parametrize("n", [4, 8, 16, 32])
-def test_association_scaling(benchmark: Any, n: int) -> None:
-    with_assoc: list[float] = []
-    assoc_only: list[float] = []
-    without: list[float] = []
+SIZES = (4, 8, 16, 32)
+
+
+def test_association_scaling(benchmark: Any) -> None:
+    """Per round, every size in turn, each run followed by its yardstick; then, per size, the
+    medians per landmark per movement, and between consecutive sizes what each added landmark
+    costs per movement (the difference of the medians per movement over the landmarks added:
+    the cost of a movement that does not depend on the landmarks cancels out)."""
+    with_assoc: dict[int, list[float]] = {n: [] for n in SIZES}
+    assoc_only: dict[int, list[float]] = {n: [] for n in SIZES}
+    without: dict[int, list[float]] = {n: [] for n in SIZES}
 
     def once() -> None:
-        seed = len(with_assoc)
-        run = run_synthetic(n, seed, moves=MOVES)
-        with_assoc.append(run.seconds)
-        assoc_only.append(run.association_seconds)
-        without.append(_yardstick(n, seed))
+        seed = len(with_assoc[SIZES[0]])
+        for n in SIZES:
+            run = run_synthetic(n, seed, moves=MOVES)
+            with_assoc[n].append(run.seconds)
+            assoc_only[n].append(run.association_seconds)
+            without[n].append(_yardstick(n, seed))
 
     benchmark.pedantic(once, rounds=7, iterations=1)
-    per = 1000.0 * float(np.median(with_assoc)) / MOVES / n
-    own = 1000.0 * float(np.median(assoc_only)) / MOVES / n
-    yard = 1000.0 * float(np.median(without)) / MOVES / n
-    benchmark.extra_info["ms_per_landmark_per_movement"] = per
-    benchmark.extra_info["association_ms_per_landmark_per_movement"] = own
-    benchmark.extra_info["yardstick_ms_per_landmark_per_movement"] = yard
-    print(
-        f"\n{n} landmarks: {per:.2f} ms per landmark per movement (estimator + association), "
-        f"association alone {own:.2f}; yardstick (joint estimator, landmarks distinct) {yard:.2f}"
-    )
+    per_move = {n: 1000.0 * float(np.median(with_assoc[n])) / MOVES for n in SIZES}
+    yard_move = {n: 1000.0 * float(np.median(without[n])) / MOVES for n in SIZES}
+    for n in SIZES:
+        own = 1000.0 * float(np.median(assoc_only[n])) / MOVES / n
+        print(
+            f"\n{n} landmarks: {per_move[n] / n:.2f} ms per landmark per movement (estimator + "
+            f"association), association alone {own:.2f}; yardstick (joint estimator, landmarks "
+            f"distinct) {yard_move[n] / n:.2f}",
+            end="",
+        )
+        benchmark.extra_info[f"ms_per_landmark_per_movement_{n}"] = per_move[n] / n
+        benchmark.extra_info[f"association_ms_per_landmark_per_movement_{n}"] = own
+        benchmark.extra_info[f"yardstick_ms_per_landmark_per_movement_{n}"] = yard_move[n] / n
+    for label, ms in (("estimator + association", per_move), ("yardstick", yard_move)):
+        steps = []
+        for a, b in itertools.pairwise(SIZES):
+            added = (ms[b] - ms[a]) / (b - a)
+            benchmark.extra_info[f"{label} ms_per_added_landmark_{a}_{b}"] = added
+            steps.append(f"{a}->{b} {added:.2f}")
+        print(f"\n{label}: ms per added landmark per movement {', '.join(steps)}", end="")
 
 
 def test_association_goals(benchmark: Any, tmp_path: Path) -> None:
