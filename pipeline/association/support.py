@@ -13,7 +13,10 @@ it, whose bearings in the map scatter about it more widely than a real landmark'
 identical landmarks (docs/RESULTS.md): names more than 10 cm off any landmark were seen at 0-35
 % of their predictions, correct names mostly at 80-100 %; the wrong names seen more often were
 mostly missed (no detection of their class in their gate) at a fifth of their predictions or
-more, which 0.6 % of the correct names were. A name seen at too few keyframes
+more, which 0.6 % of the correct names were. A name found by the search among unnamed
+detections (from rays the hypotheses kept disputing) is weaker evidence: seen at half its
+predictions or fewer and contested at 35 % of them or more, its blobs are as often another
+landmark's, and it is doubtful too. A name seen at too few keyframes
 since its naming for either to show is unconfirmed (:meth:`Support.unconfirmed`): reported, as
 the name has not yet been put to the test.
 """
@@ -39,6 +42,15 @@ DOUBT_NEVER_SEEN = 2
 #: or predicted at DOUBT_MIN_PREDICTIONS and missed (no detection of its class in its gate) at
 #: this share of them or more.
 DOUBT_MISSED_SHARE = 0.2
+#: A name found by the search among unnamed detections (rays the hypotheses kept disputing)
+#: is also doubtful once predicted at DOUBT_MIN_PREDICTIONS keyframes, seen at no more than this
+#: share of them...
+DOUBT_SEARCHED_SEEN_SHARE = 0.5
+#: ... and contested at this share or more: its blobs are as often another landmark's. Measured
+#: at the end of 520 simulated runs of 8 identical landmarks (docs/RESULTS.md): of the names the
+#: search found, 11 of the 13 more than 10 cm off end doubtful with it (5 without), and 121 of
+#: the 1,847 right ones (35 without).
+DOUBT_SEARCHED_CONTESTED_SHARE = 0.35
 #: A name is also doubtful when it has this many bearings in the map...
 DOUBT_SCATTER_BEARINGS = 10
 #: ... and they scatter about it this many times as widely as the map's bearings do (robust
@@ -64,6 +76,8 @@ class Support:
     scatter : (int, float) or None
         Its bearings in the map and how widely they scatter about it (the estimator's
         :attr:`~pipeline.joint.JointSlam.bearing_scatter`; None: not known).
+    searched : bool
+        Named by the search among unnamed detections, not from a hypothesis.
     """
 
     named_at: int
@@ -73,6 +87,7 @@ class Support:
     vague: int = 0
     hidden: int = 0
     scatter: tuple[int, float] | None = None
+    searched: bool = False
 
     @property
     def predicted(self) -> int:
@@ -93,20 +108,31 @@ class Support:
         n = self.predicted
         never = n >= DOUBT_NEVER_SEEN and self.seen == 0
         rare = self.seen < DOUBT_SEEN_SHARE * n or self.missed >= DOUBT_MISSED_SHARE * n
-        if not never and (n < DOUBT_MIN_PREDICTIONS or not rare):
-            if self.scatter is None:
-                return None
-            count, ratio = self.scatter
-            if count < DOUBT_SCATTER_BEARINGS or ratio <= DOUBT_SCATTER:
-                return None
+        if never or (n >= DOUBT_MIN_PREDICTIONS and rare):
             return (
-                f"its {count} bearings in the map scatter {ratio:.1f} times as widely as the "
-                "map's bearings do: they may come from several landmarks"
+                f"seen at {self.seen} of {n} keyframes where predicted since it was named "
+                f"(movement {self.named_at}; {self.missed} missed, {self.contested} contested, "
+                f"{self.vague} too uncertain): it may stand where rays of several landmarks meet"
             )
+        shared = (
+            self.seen <= DOUBT_SEARCHED_SEEN_SHARE * n
+            and self.contested >= DOUBT_SEARCHED_CONTESTED_SHARE * n
+        )
+        if self.searched and n >= DOUBT_MIN_PREDICTIONS and shared:
+            return (
+                f"found by the search among unnamed detections (movement {self.named_at}), "
+                f"then seen at only {self.seen} of {n} keyframes where predicted and contested "
+                f"at {self.contested}: its blobs are as often other landmarks'; it may stand "
+                "where their rays meet"
+            )
+        if self.scatter is None:
+            return None
+        count, ratio = self.scatter
+        if count < DOUBT_SCATTER_BEARINGS or ratio <= DOUBT_SCATTER:
+            return None
         return (
-            f"seen at {self.seen} of {n} keyframes where predicted since it was named "
-            f"(movement {self.named_at}; {self.missed} missed, {self.contested} contested, "
-            f"{self.vague} too uncertain): it may stand where rays of several landmarks meet"
+            f"its {count} bearings in the map scatter {ratio:.1f} times as widely as the "
+            "map's bearings do: they may come from several landmarks"
         )
 
     def unconfirmed(self) -> str | None:

@@ -645,9 +645,18 @@ class Associator:
             self._give_name(label, h, lines[id(h)], out)
         self.hypotheses[label] = [h for h in self.hypotheses[label] if not h.keys & taken]
 
-    def _give_name(self, label: str, h: Hypothesis, lines: int, out: MovementAssociation) -> bool:
-        """Name ``h`` (seen along ``lines`` lines of sight): the next free name of ``label``, or
-        the most doubtful one when the catalog is full (False: none is doubtful; reported)."""
+    def _give_name(
+        self,
+        label: str,
+        h: Hypothesis,
+        lines: int,
+        out: MovementAssociation,
+        *,
+        searched: bool = False,
+    ) -> bool:
+        """Name ``h`` (seen along ``lines`` lines of sight; ``searched``: found by the search
+        among unnamed detections): the next free name of ``label``, or the most doubtful one
+        when the catalog is full (False: none is doubtful; reported)."""
         if len(self.named[label]) < self.capacity[label]:
             name = slot_name(label, len(self.named[label]) + 1)
             self.named[label].append(name)
@@ -663,7 +672,7 @@ class Associator:
             name = weakest
             self._retract(label, name, h, lines, out)
         self.unmapped[name] = h
-        self.support[name] = Support(out.index)
+        self.support[name] = Support(out.index, searched=searched)
         if (young := self.support[name].unconfirmed()) is not None:
             out.unconfirmed[name] = young
         out.confirmed.append(name)
@@ -732,7 +741,7 @@ class Associator:
         seen, predicted = self._predicted_seen(h, min(r.movement for r in h.rays))
         if seen < DISCOVER_SEEN_SHARE * predicted:
             return
-        if self._give_name(label, h, lines, out):
+        if self._give_name(label, h, lines, out, searched=True):
             self.hypotheses[label] = [o for o in self.hypotheses[label] if not o.keys & h.keys]
 
     def _predicted_seen(self, h: Hypothesis, since: int) -> tuple[int, int]:

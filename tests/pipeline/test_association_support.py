@@ -16,6 +16,8 @@ from pipeline.association.support import (
     DOUBT_NEVER_SEEN,
     DOUBT_SCATTER,
     DOUBT_SCATTER_BEARINGS,
+    DOUBT_SEARCHED_CONTESTED_SHARE,
+    DOUBT_SEARCHED_SEEN_SHARE,
     DOUBT_SEEN_SHARE,
     Outcome,
     Support,
@@ -84,6 +86,39 @@ def test_a_name_whose_bearings_scatter_is_doubtful_however_often_seen() -> None:
     rare = _support(*["missed"] * DOUBT_MIN_PREDICTIONS)
     rare.scatter = (50, 2.0 * DOUBT_SCATTER)
     assert "seen at 0 of" in (rare.doubt() or "")
+
+
+def test_a_name_the_search_found_is_doubtful_when_its_blobs_are_as_often_others() -> None:
+    # found by the search among unnamed detections, then seen at half of its predictions and
+    # contested at 40 %: seen often enough for the rule every name obeys, but its blobs are as
+    # often another landmark's; a name from a hypothesis with the same counts is not doubtful
+    n = 20
+    seen = math.floor(DOUBT_SEARCHED_SEEN_SHARE * n)
+    contested = math.ceil(DOUBT_SEARCHED_CONTESTED_SHARE * n)
+    outcomes: list[Outcome] = ["seen"] * seen + ["contested"] * contested
+    outcomes += ["vague"] * (n - seen - contested)
+    assert seen >= DOUBT_SEEN_SHARE * n  # the counts alone would not make it doubtful
+    plain = _support(*outcomes)
+    assert plain.doubt() is None
+    searched = _support(*outcomes)
+    searched.searched = True
+    why = searched.doubt()
+    assert why is not None and "found by the search among unnamed detections" in why
+    assert f"seen at only {seen} of {n} keyframes" in why and f"contested at {contested}" in why
+    # one more sighting instead of a vague prediction, or one contest fewer: not doubtful
+    more_seen = _support("seen", *outcomes[:-1])
+    more_seen.searched = True
+    assert more_seen.seen > DOUBT_SEARCHED_SEEN_SHARE * n and more_seen.doubt() is None
+    fewer_contests = _support(
+        *(outcomes[: seen + contested - 1] + ["vague"] * (n - seen - contested + 1))
+    )
+    fewer_contests.searched = True
+    assert fewer_contests.contested < DOUBT_SEARCHED_CONTESTED_SHARE * n
+    assert fewer_contests.doubt() is None
+    # and a young name is left alone
+    young = _support(*outcomes[: DOUBT_MIN_PREDICTIONS - 1])
+    young.searched = True
+    assert young.doubt() is None
 
 
 def test_a_name_is_unconfirmed_until_seen_enough_and_never_both() -> None:

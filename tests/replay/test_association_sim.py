@@ -165,23 +165,50 @@ def test_names_off_their_landmark_are_reported_doubtful(
     # a layout where a name given to rays of several landmarks stays (blue#5 of unwrapped 213
     # and blue#6 of omni 213, 31 cm off, each seen at 13 of 26 predictions):
     # seen too rarely where the map predicts it, it is reported as doubtful in the summary,
-    # its result line and Rerun; the names on real landmarks are not
+    # its result line and Rerun; the names on real landmarks are not, but for one the search
+    # among unnamed detections found (blue#8, 1.5 cm off, whose blobs are as often another
+    # landmark's: the search's doubt, see below)
     from replay.process import result_line
 
     log, s, off = _off_names(camera, seed, tmp_path)
     doubtful = s.summary["association"]["doubtful"]
-    assert set(doubtful) == off
-    assert all("keyframes where predicted since it was named" in why for why in doubtful.values())
-    assert f"doubtful: {', '.join(sorted(off))}" in result_line(s.summary)
+    assert off <= set(doubtful)
+    assert all("keyframes where predicted since it was named" in doubtful[n] for n in off)
+    assert all("found by the search" in doubtful[n] for n in set(doubtful) - off)
+    assert f"doubtful: {', '.join(sorted(doubtful))}" in result_line(s.summary)
     # and in Rerun: the map labels them, the log says why (read back with Rerun's reader)
     last, rows = _replayed(log, tmp_path)
-    assert {n.removesuffix(" (doubtful)") for n in last if n.endswith(" (doubtful)")} == off
+    labelled = {n.removesuffix(" (doubtful)") for n in last if n.endswith(" (doubtful)")}
+    assert labelled == set(doubtful)
     texts = [t for r in rows["/log"] for t in r.get("TextLog:text") or ()]
     assert all(any(f"{n} doubtful: seen at" in t for t in texts) for n in off)
     # and every name's first detections
     for m in s.summary["movements"]:
         for n, rays in m.get("named_from", {}).items():
             assert any(f"{m['index']}: {n} named from {len(rays)} detections" in t for t in texts)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("camera", ["unwrapped", "omni"])
+def test_names_the_search_found_off_their_landmark_are_reported_doubtful(
+    camera: str, tmp_path: Path
+) -> None:
+    # layout 204: blue#2, found by the search among unnamed detections, stands 38 cm off any
+    # landmark; it is seen at about half of its predictions, contested at about 40 %, and its
+    # bearings do not scatter enough to tell. Its blobs are as often another landmark's: it is
+    # reported doubtful with that reason, in the summary, its result line and Rerun; the names
+    # on real landmarks are not.
+    from replay.process import result_line
+
+    log, s, off = _off_names(camera, 204, tmp_path)
+    doubtful = s.summary["association"]["doubtful"]
+    assert set(doubtful) == off == {"blue#2"}
+    assert "found by the search among unnamed detections" in doubtful["blue#2"]
+    assert "doubtful: blue#2" in result_line(s.summary)
+    last, rows = _replayed(log, tmp_path)
+    assert {n.removesuffix(" (doubtful)") for n in last if n.endswith(" (doubtful)")} == off
+    texts = [t for r in rows["/log"] for t in r.get("TextLog:text") or ()]
+    assert any("blue#2 doubtful: found by the search" in t for t in texts)
 
 
 @pytest.mark.slow
