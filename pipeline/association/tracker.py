@@ -27,7 +27,8 @@ For each movement (its two keyframes, O1 and O2):
    :data:`MAX_AGE` movements, is dropped.
    The detections no name took are kept for :data:`DISCOVER_WINDOW` movements; when the rays
    of many of them, from many keyframes, pass near one point (a landmark whose rays the
-   hypotheses kept disputing or swallowing), that point is named too.
+   hypotheses kept disputing or swallowing, or one seen only from a narrow fan of directions,
+   along too few lines of sight for a hypothesis), that point is named too.
 
 5. What became of each named landmark's predictions since it was named (seen, missed,
    contested, too uncertain; hidden behind a nearer one is not a test) is counted
@@ -95,6 +96,11 @@ DISCOVER_KEYFRAMES = 8
 DISCOVER_LINES = 4
 DISCOVER_MOVEMENTS = 3
 DISCOVER_SEEN_SHARE = 0.8
+#: A point whose rays span only DISCOVER_LINES - 1 lines of sight (a landmark at the arena's
+#: edge, seen from a narrow fan of directions) is named when they come from this many keyframes
+#: and its class was detected at DISCOVER_FAN_SEEN_SHARE of the keyframes where predicted.
+DISCOVER_FAN_KEYFRAMES = 12
+DISCOVER_FAN_SEEN_SHARE = 0.9
 #: A named landmark whose predicted bearing is less certain than this (std, in eps) is too
 #: poorly placed to gate detections: reported, left out of the assignment.
 MAX_PRED_STD_EPS = 2.0
@@ -733,13 +739,14 @@ class Associator:
             point = h.point_fl
         assert h is not None
         lines = h.lines_of_sight(self._distinct)
-        if lines < DISCOVER_LINES or len(h.movements) < DISCOVER_MOVEMENTS:
+        fan = lines == DISCOVER_LINES - 1 and len(h.rays) >= DISCOVER_FAN_KEYFRAMES
+        if (lines < DISCOVER_LINES and not fan) or len(h.movements) < DISCOVER_MOVEMENTS:
             return
         for _, e in self._known(label, mapped):
             if 2 * sum(self._ray_fits(r, e) for r in h.rays) > len(h.rays):
                 return  # mostly bearings of a named landmark: that one, seen again
         seen, predicted = self._predicted_seen(h, min(r.movement for r in h.rays))
-        if seen < DISCOVER_SEEN_SHARE * predicted:
+        if seen < (DISCOVER_FAN_SEEN_SHARE if fan else DISCOVER_SEEN_SHARE) * predicted:
             return
         if self._give_name(label, h, lines, out, searched=True):
             self.hypotheses[label] = [o for o in self.hypotheses[label] if not o.keys & h.keys]
