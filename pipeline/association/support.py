@@ -48,8 +48,8 @@ DOUBT_MISSED_SHARE = 0.2
 DOUBT_SEARCHED_SEEN_SHARE = 0.5
 #: ... and contested at this share or more: its blobs are as often another landmark's. Measured
 #: at the end of 520 simulated runs of 8 identical landmarks (docs/RESULTS.md): of the names the
-#: search found, 11 of the 13 more than 10 cm off end doubtful with it (5 without), and 121 of
-#: the 1,847 right ones (35 without).
+#: search found, 15 of the 19 more than 10 cm off end doubtful (the other 4 unconfirmed), and
+#: 125 of the 1,996 right ones; without this rule 5 of 13 and 35 of 1,847 were.
 DOUBT_SEARCHED_CONTESTED_SHARE = 0.35
 #: A name is also doubtful when it has this many bearings in the map...
 DOUBT_SCATTER_BEARINGS = 10
