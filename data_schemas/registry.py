@@ -74,6 +74,11 @@ _TOPIC_LIST = [
         "bslam.Estimate",
         "derived: map after one movement (means, covariances in FL) or why it was skipped",
     ),
+    Topic(
+        "/pipeline/association",
+        "bslam.Association",
+        "derived, landmarks that look alike: every keyframe detection with the final map",
+    ),
 ]
 
 #: Topic name -> :class:`Topic`.

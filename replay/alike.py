@@ -5,7 +5,9 @@
 the named landmarks' bearings, and after the estimator has placed the movement lets the
 associator grow its hypotheses, makes the estimator forget the landmarks whose names were
 taken back, and hands it the earlier bearings of landmarks named now
-(:meth:`pipeline.joint.JointSlam.add_history`).
+(:meth:`pipeline.joint.JointSlam.add_history`). Once the log is processed, :meth:`final`
+associates every keyframe's detections again with the final map
+(:func:`pipeline.association.final.associate_final`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from collections.abc import Mapping, Sequence
 
 from data_schemas.session import Session, shared_classes
 from pipeline.association import Associator, MovementAssociation, pose_between
+from pipeline.association.final import FinalDetection
 from pipeline.bearings import Detection
 from pipeline.estimators import Estimator
 from pipeline.slam import MovementObservation, MovementResult
@@ -30,6 +33,8 @@ class AlikeLandmarks:
             session.reference,
             vision_error_rad=session.vision_error_rad,
         )
+        #: every keyframe's detections per shared class: (movement, end) -> label -> bearings
+        self.keyframe_blobs: dict[tuple[int, int], dict[str, list[float]]] = {}
 
     def landmarks(self, catalog: Sequence[str]) -> list[str]:
         """What the estimator maps: catalog landmarks of their own class, then ``red#k`` names."""
@@ -58,6 +63,8 @@ class AlikeLandmarks:
             }
             for dets in detections
         )
+        for end, per_class in enumerate(blobs):
+            self.keyframe_blobs[index, end] = per_class
         assoc = self.associator.associate(
             index, (unique[0], unique[1]), (blobs[0], blobs[1]), estimator.estimates
         )
@@ -91,3 +98,17 @@ class AlikeLandmarks:
         for name, bearings in assoc.history.items():
             if add_history is not None:
                 add_history(name, bearings)
+
+    def final(self, estimator: Estimator) -> list[FinalDetection] | None:
+        """Every keyframe's detections associated with ``estimator``'s final map (None: the
+        estimator does not place its keyframes with their covariances)."""
+        keyframe_poses = getattr(estimator, "keyframe_poses", None)
+        if keyframe_poses is None:
+            return None
+        noise = getattr(estimator, "noise", None)
+        return self.associator.associate_final(
+            self.keyframe_blobs,
+            keyframe_poses(),
+            estimator.estimates,
+            None if noise is None else noise.sigma_rad,
+        )

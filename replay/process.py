@@ -126,6 +126,10 @@ def result_line(doc: dict[str, Any]) -> str:
         seen = sum(c["at_keyframes"] for c in counts)
         if seen:
             text += f", {100 * sum(c['named'] for c in counts) / seen:.0f} % of {seen} detections"
+        final = assoc.get("final_map", {}).values()
+        if sum(c["detections"] for c in final):
+            share = sum(c["named"] for c in final) / sum(c["detections"] for c in final)
+            text += f" ({100 * share:.0f} % with the final map)"
         if assoc["movements_with_unresolved"]:
             text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
         if assoc.get("doubtful"):

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from data_schemas.errors import EstimationError
 from data_schemas.session import Session
+from pipeline.association.final import STATUSES, FinalDetection
 from pipeline.bearings import Detection
 from pipeline.estimators import DEFAULT_DISTANCE_PRIOR_REL, DEFAULT_ESTIMATOR, ESTIMATORS
 from pipeline.priors import PriorName
@@ -242,6 +243,46 @@ class MovementRecord:
 
 
 @dataclass(frozen=True)
+class AssociationRecord:
+    """Every keyframe detection of a shared class associated with the final map, once the
+    log is processed (landmarks that look alike, joint estimator;
+    :func:`pipeline.association.final.associate_final`).
+
+    Attributes
+    ----------
+    timestamp_ns, log_time_ns : int
+        Of the last frame processed.
+    detections : list of FinalDetection
+        Every keyframe detection of a shared class, its name (if any) and status.
+    """
+
+    timestamp_ns: int
+    log_time_ns: int
+    detections: Sequence[FinalDetection]
+
+    def counts(self) -> dict[str, dict[str, int]]:
+        """Per class: ``detections`` and how many of them are in each status (``named``,
+        ``contested``, ``unexplained``, ``not placed``)."""
+        out: dict[str, dict[str, int]] = {}
+        for d in self.detections:
+            c = out.setdefault(d.label, {"detections": 0, **dict.fromkeys(STATUSES, 0)})
+            c["detections"] += 1
+            c[d.status] += 1
+        return out
+
+    def text(self) -> str:
+        """One line per class: how many detections the final map names, and the rest."""
+        parts = []
+        for label, c in self.counts().items():
+            rest = ", ".join(f"{c[s]} {s}" for s in STATUSES[1:] if c[s])
+            parts.append(
+                f"{label}: {c['named']} of {c['detections']} detections named"
+                + (f" ({rest})" if rest else "")
+            )
+        return "with the final map, " + "; ".join(parts)
+
+
+@dataclass(frozen=True)
 class RunInfo:
     """What every sink learns before the first record.
 
@@ -281,6 +322,10 @@ class Sink(Protocol):
 
     def movement(self, record: MovementRecord) -> None:
         """One movement, in index order, after its end keyframe."""
+
+    def association(self, record: AssociationRecord) -> None:
+        """Once the last movement is processed, with landmarks that look alike: every
+        keyframe detection associated with the final map."""
 
     def finish(self) -> None:
         """Called once at the end (also after an error, to release files)."""

@@ -42,6 +42,7 @@ from replay.alike import AlikeLandmarks
 from replay.estimation import estimator_for, joint_fields
 from replay.plan import PLAN_TOPICS, MovementPlan
 from replay.records import (
+    AssociationRecord,
     EstimateRecord,
     FrameRecord,
     MethodConfig,
@@ -196,9 +197,20 @@ class Runner:
             for index in sorted(self.plan.keyframes):
                 if index not in self.state.done:
                     self._movement(index)
+            self._associate_final()
         finally:
             for sink in self.sinks:
                 sink.finish()
+
+    def _associate_final(self) -> None:
+        """Landmarks that look alike: every keyframe's detections with the final map."""
+        final = None if self.alike is None else self.alike.final(self.slam)
+        if final is None:
+            return
+        record = AssociationRecord(self.state.last_timestamp_ns, self.state.last_log_time_ns, final)
+        logger.info("%s: %s", self.log.name, record.text())
+        for sink in self.sinks:
+            sink.association(record)
 
     def _message(self, msg: LogMessage) -> None:
         """One message in log order: hold a frame, grow the plan, run a finished movement."""

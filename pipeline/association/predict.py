@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+
+#: A named landmark whose predicted bearing is less certain than this (std, in eps) is too
+#: poorly placed to gate detections: reported, left out of the assignment.
+MAX_PRED_STD_EPS = 2.0
 
 
 def predict_bearings(
@@ -16,6 +22,7 @@ def predict_bearings(
     *,
     origin_var_fl: float = 0.0,
     bearing_var_rad: float = 0.0,
+    pose_cov: NDArray[np.float64] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Bearing of each point seen from a keyframe, and its standard deviation.
 
@@ -33,6 +40,10 @@ def predict_bearings(
         Variance of the keyframe position along any direction, FL^2.
     bearing_var_rad : float
         Variance added to every prediction (measurement noise, heading), rad^2.
+    pose_cov : (3, 3) float or None
+        Covariance of the keyframe's ``(x, y, heading)`` in its own frame (FL^2, FL rad,
+        rad^2; :class:`pipeline.joint.geometry.KeyframePose`), taken as independent of the
+        points'; ``heading_rad`` must then be one float.
 
     Returns
     -------
@@ -46,8 +57,32 @@ def predict_bearings(
     jac = np.column_stack((-d[:, 1], d[:, 0])) / r2[:, None]  # d bearing / d point, (n, 2)
     var = np.einsum("ni,nij,nj->n", jac, np.asarray(covs_fl, np.float64).reshape(-1, 2, 2), jac)
     var = var + origin_var_fl / r2 + bearing_var_rad
+    if pose_cov is not None:
+        c, s = math.cos(float(heading_rad)), math.sin(float(heading_rad))
+        # d bearing / d (x, y, heading) of the keyframe, (x, y) in its own frame
+        jac_pose = np.column_stack((-(jac @ np.array([[c, -s], [s, c]])), -np.ones(len(d))))
+        var = var + np.einsum("ni,ij,nj->n", jac_pose, np.asarray(pose_cov, np.float64), jac_pose)
     bearing = wrap_rad(np.arctan2(d[:, 1], d[:, 0]) - heading_rad)
     return np.asarray(bearing, np.float64), np.sqrt(np.maximum(var, 0.0))
+
+
+def predict_ranges(
+    origin_fl: NDArray[np.float64],
+    points_fl: NDArray[np.float64],
+    covs_fl: NDArray[np.float64],
+    *,
+    origin_var_fl: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Distance (n,) of each point from a keyframe and its first-order std (FL).
+
+    ``origin_fl`` (2,), ``points_fl`` (n, 2), ``covs_fl`` (n, 2, 2) FL^2; ``origin_var_fl`` the
+    keyframe position's variance along any direction (FL^2).
+    """
+    v = np.asarray(points_fl, np.float64).reshape(-1, 2) - np.asarray(origin_fl, np.float64)
+    range_fl = np.linalg.norm(v, axis=1)
+    u = v / np.maximum(range_fl, 1e-12)[:, None]
+    var = np.einsum("ni,nij,nj->n", u, np.asarray(covs_fl, np.float64).reshape(-1, 2, 2), u)
+    return range_fl, np.sqrt(np.maximum(var + origin_var_fl, 0.0))
 
 
 def ray_point_cov(

@@ -54,6 +54,7 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.assign import GATE_CHI2, Assignment, assign
+from pipeline.association.final import FinalDetection, associate_final
 from pipeline.association.hypotheses import (
     FIT_TOL_EPS,
     MIN_PARALLAX_EPS,
@@ -62,11 +63,11 @@ from pipeline.association.hypotheses import (
     cannot_meet,
     fit,
 )
-from pipeline.association.predict import predict_bearings
+from pipeline.association.predict import MAX_PRED_STD_EPS, predict_bearings, predict_ranges
 from pipeline.association.support import Outcome, Support
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
-from pipeline.joint.geometry import MovementPose, Sightings, pose_params, resect
+from pipeline.joint.geometry import KeyframePose, MovementPose, Sightings, pose_params, resect
 from pipeline.joint.noise import robust_std
 
 #: A hypothesis missing from this many keyframes where it was predicted is dropped.
@@ -101,9 +102,6 @@ DISCOVER_SEEN_SHARE = 0.8
 #: and its class was detected at DISCOVER_FAN_SEEN_SHARE of the keyframes where predicted.
 DISCOVER_FAN_KEYFRAMES = 12
 DISCOVER_FAN_SEEN_SHARE = 0.9
-#: A named landmark whose predicted bearing is less certain than this (std, in eps) is too
-#: poorly placed to gate detections: reported, left out of the assignment.
-MAX_PRED_STD_EPS = 2.0
 #: A hypothesis sharing a ray with another is confirmed only when seen along this many more
 #: lines of sight than it.
 RIVAL_LEAD = 2
@@ -221,6 +219,29 @@ class Associator:
     def names(self) -> list[str]:
         """Every name a landmark of a shared class may get, class by class (``red#1`` ...)."""
         return [slot_name(c, k + 1) for c, n in self.capacity.items() for k in range(n)]
+
+    def associate_final(
+        self,
+        detections: Mapping[tuple[int, int], Mapping[str, Sequence[float]]],
+        poses: Mapping[tuple[int, int], KeyframePose],
+        mapped: Mapping[str, LandmarkEstimate],
+        noise_rad: float | None = None,
+    ) -> list[FinalDetection]:
+        """Every keyframe's detections associated with the final map (the estimator's
+        ``mapped`` landmarks and keyframe ``poses``) under the names given so far:
+        :func:`pipeline.association.final.associate_final`. ``noise_rad``: the map's bearing
+        noise std (default the one eps implies)."""
+        known = {
+            label: [(n, mapped[n]) for n in self.named[label] if n in mapped]
+            for label in self.capacity
+        }
+        return associate_final(
+            detections,
+            poses,
+            known,
+            noise_rad=self.sigma_rad if noise_rad is None else noise_rad,
+            eps_rad=self.eps_rad,
+        )
 
     # ------------------------------------------------------------------ placement
     def _place(
@@ -532,12 +553,12 @@ class Associator:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Distances (n,) of named landmarks from ``origin_fl`` and their stds (FL), NaN for
         a name not trusted to hide others (not in the map, or not confirmed)."""
-        pts = np.array([e.mean_fl for _, e in usable]).reshape(-1, 2)
-        covs = np.array([e.cov_fl for _, e in usable]).reshape(-1, 2, 2)
-        v = pts - origin_fl
-        range_fl = np.linalg.norm(v, axis=1)
-        u = v / np.maximum(range_fl, 1e-12)[:, None]
-        range_std_fl = np.sqrt(np.einsum("ni,nij,nj->n", u, covs, u) + pos_var)
+        range_fl, range_std_fl = predict_ranges(
+            origin_fl,
+            np.array([e.mean_fl for _, e in usable]),
+            np.array([e.cov_fl for _, e in usable]),
+            origin_var_fl=pos_var,
+        )
         trusted = [
             n in mapped and n in self.support and self.support[n].confirmed for n, _ in usable
         ]

@@ -32,6 +32,7 @@ from pipeline.frame_change import to_fl
 from pipeline.fusion import PAPER_N_L
 from pipeline.joint import graph as g
 from pipeline.joint.geometry import (
+    KeyframePose,
     MovementPose,
     Sightings,
     determinacy,
@@ -281,6 +282,25 @@ class JointSlam:
         for k in sorted(self._placed):
             mp = self._movement_pose(k)
             out.append((mp.o1_fl[None, :], mp.o2_fl[None, :]))
+        return out
+
+    def keyframe_poses(self) -> dict[tuple[int, int], KeyframePose]:
+        """Every keyframe in the graph, ``(movement, end)`` (end 0: O1, 1: O2), as iSAM2 has it
+        now: position and heading (FL) and the covariance of its tangent ``(x, y, heading)``
+        in the keyframe's own frame (FL, rad), scaled by the estimated noise as the landmarks'
+        covariances are."""
+        scale = 1.0
+        if self.noise is not None:
+            scale = (self.noise.sigma_rad / self.sigma_model_rad) ** 2
+        out = {}
+        for k in sorted(self._placed):
+            for end in (0, 1):
+                key = g.pose_key(k, end)
+                p = self._values.atPose2(key)
+                cov = np.asarray(self._isam.marginalCovariance(key), np.float64) * scale
+                out[k, end] = KeyframePose(
+                    np.array([p.x(), p.y()]), float(p.theta()), 0.5 * (cov + cov.T)
+                )
         return out
 
     # ------------------------------------------------------------------ placement

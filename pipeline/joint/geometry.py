@@ -22,6 +22,26 @@ LENGTHS_FL = np.geomspace(0.02, 4.0, 48)
 
 
 @dataclass(frozen=True)
+class KeyframePose:
+    """One keyframe as the map has it.
+
+    Attributes
+    ----------
+    origin_fl : (2,) float
+        Position, FL.
+    heading_rad : float
+        Heading (FL, CCW from the x axis); bearings are measured from it.
+    cov : (3, 3) float
+        Covariance of ``(x, y, heading)`` perturbations in the keyframe's own frame (x ahead,
+        y to the left; FL^2, FL rad, rad^2).
+    """
+
+    origin_fl: NDArray[np.float64]
+    heading_rad: float
+    cov: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
 class MovementPose:
     """Start point, heading and length of one straight movement (FL).
 

@@ -4,7 +4,8 @@ Written with the recorder's crash-safe :class:`~data_schemas.mcap.writer.LogWrit
 metadata of the source log comes first (with a ``derived`` block naming the source and the
 method), then ``/pipeline/bearings`` per processed frame and ``/pipeline/particles_fr``,
 ``/pipeline/particles_fl``, ``/pipeline/estimate`` per movement, each at the ``log_time`` of the
-source frame it comes from, so source and derived logs line up in time.
+source frame it comes from, so source and derived logs line up in time; with landmarks that look
+alike, ``/pipeline/association`` at the end (every keyframe detection with the final map).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import schema_dict
 from data_schemas.stamps import stamp_from_ns
 from pipeline.bearings.detection import Detection
-from replay.records import FrameRecord, MovementRecord, RunInfo
+from replay.records import AssociationRecord, FrameRecord, MovementRecord, RunInfo
 
 
 class SettableClock:
@@ -185,6 +186,22 @@ class DerivedLogSink:
                 "o2": record.o2_fl.mean(axis=0).tolist(),
             }
         self._write(t, "/pipeline/estimate", estimate)
+
+    def association(self, record: AssociationRecord) -> None:
+        rows = []
+        for d in record.detections:
+            row: dict[str, Any] = {
+                "movement": d.movement,
+                "phase": ("start", "end")[d.end],
+                "class": d.label,
+                "bearing_rad": d.bearing_rad,
+                "status": d.status,
+            }
+            if d.name is not None:
+                row["name"] = d.name
+            rows.append(row)
+        msg = {"timestamp": stamp_from_ns(record.timestamp_ns), "detections": rows}
+        self._write(record.log_time_ns, "/pipeline/association", msg)
 
     def finish(self) -> None:
         if self._writer is not None:

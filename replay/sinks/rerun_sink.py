@@ -48,7 +48,7 @@ from data_schemas.colors import NOMINAL_BGR
 from data_schemas.session import Session, shared_classes
 from pipeline.association.tracker import slot_name
 from replay.fig1 import log_fig1
-from replay.records import FrameRecord, MovementRecord, RunInfo
+from replay.records import AssociationRecord, FrameRecord, MovementRecord, RunInfo
 from replay.truth import errors_m
 
 LOG_TIME = "log_time"
@@ -307,6 +307,12 @@ class RerunSink:
         self._log_joint(record)
         self._log_fr(record, run.session)
         self._log_fl(record, run)
+
+    def association(self, record: AssociationRecord) -> None:
+        if self._live and self._batch.log_time_ns:
+            self._send_frames()
+        self._set_time(record.log_time_ns, None)
+        self.rec.log("log", rr.TextLog(record.text(), level="INFO"))
 
     def _log_joint(self, record: MovementRecord) -> None:
         """Placement, residuals, noise estimate and re-initialization (joint estimator only)."""

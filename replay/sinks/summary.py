@@ -19,9 +19,11 @@ with it and ``named_from`` the keyframe detections each was named from,
 something unresolved, per class the blobs ``detections`` at keyframes and how many of them got a
 name (at their keyframe or later, ``named_from``), the names still ``doubtful`` after the last
 movement (name -> why: seen too rarely where predicted since named, or bearings that scatter too
-widely), those still ``unconfirmed`` (name -> why) and, for simulated logs, ``matched_truth``
-(each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
-measured against it).
+widely), those still ``unconfirmed`` (name -> why), per class ``final_map``: the keyframe
+detections associated again with the final map once the log is processed (``named``,
+``contested``, ``unexplained``, ``not placed``, and ``per_name``) and, for simulated logs,
+``matched_truth`` (each ``red#k`` matched to the nearest true landmark of its class,
+one-to-one; ``error_m`` is measured against it).
 """
 
 from __future__ import annotations
@@ -34,7 +36,13 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from data_schemas.session import shared_classes
-from replay.records import EstimateRecord, FrameRecord, MovementRecord, RunInfo
+from replay.records import (
+    AssociationRecord,
+    EstimateRecord,
+    FrameRecord,
+    MovementRecord,
+    RunInfo,
+)
 from replay.truth import class_of_name, errors_m, match_truth
 
 DIGITS = 9
@@ -74,6 +82,7 @@ class SummarySink:
         self._matched: dict[str, str] = {}
         self._doubtful: dict[str, str] = {}
         self._unconfirmed: dict[str, str] = {}
+        self._final: AssociationRecord | None = None
         # per shared class: blobs detected at keyframes, and those given a name (then or later)
         self._blobs: dict[str, int] = {}
         self._named_blobs: dict[str, int] = {}
@@ -190,6 +199,9 @@ class SummarySink:
             entry["mean_error_m"] = _num(float(np.mean(list(self._errors_m.values()))))
         self.document["movements"].append(entry)
 
+    def association(self, record: AssociationRecord) -> None:
+        self._final = record
+
     def finish(self) -> None:
         self.document["landmarks"] = self._landmarks
         if self._run is not None:
@@ -229,6 +241,15 @@ class SummarySink:
                 for label in shared
             },
         }
+        if self._final is not None:
+            final: dict[str, dict[str, Any]] = {
+                label: dict(c) for label, c in self._final.counts().items()
+            }
+            for d in self._final.detections:
+                if d.name is not None:
+                    per_name = final[d.label].setdefault("per_name", {})
+                    per_name[d.name] = per_name.get(d.name, 0) + 1
+            self.document["association"]["final_map"] = final
         if self._doubtful:
             self.document["association"]["doubtful"] = dict(sorted(self._doubtful.items()))
         if self._unconfirmed:

@@ -17,7 +17,13 @@ import numpy as np
 from tqdm import tqdm
 
 from pipeline.estimate import chi2_2dof_quantile
-from replay.records import EstimateRecord, FrameRecord, MovementRecord, RunInfo
+from replay.records import (
+    AssociationRecord,
+    EstimateRecord,
+    FrameRecord,
+    MovementRecord,
+    RunInfo,
+)
 from replay.stages import CREDIBLE_P
 
 
@@ -96,6 +102,13 @@ class TerminalView:
             e = record.estimates.get(name)
             if e is not None:
                 self._set(2 + i, f"  {name}: {ellipse_text(e)}")
+
+    def association(self, record: AssociationRecord) -> None:
+        text = f"{self._header}{record.text()}"
+        if self._in_place:
+            self._set(1, text)
+        else:
+            print(text, file=self._stream, flush=True)
 
     def finish(self) -> None:
         for line in self._lines:

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.association import Associator, MovementAssociation, pose_between
+from pipeline.association.final import FinalDetection
 from pipeline.estimators import make_estimator
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import simulate_bearings
@@ -38,6 +39,9 @@ class SyntheticRun:
     unit_m: float = 1.0
     seconds: float = 0.0
     association_seconds: float = 0.0
+    #: every keyframe detection associated with the final map, and the landmark it truly is
+    final: list[tuple[FinalDetection, str]] = field(default_factory=list)
+    final_seconds: float = 0.0
 
     def matched(self) -> dict[str, str]:
         """``blue#k`` -> true landmark: nearest, one-to-one."""
@@ -111,6 +115,8 @@ def run_synthetic(
             Arena(*ARENA_M),
             tuple(Landmark(k, x, y, "blue", post_radius_m) for k, (x, y) in lms.items()),
         )
+    keyframe_blobs: dict[tuple[int, int], dict[str, list[float]]] = {}
+    true_of: dict[tuple[int, int], list[str]] = {}  # the landmark of each blob
     tick = time.perf_counter()
     for obs in sim.observations:
         ends = (obs.bearings_o1_rad, obs.bearings_o2_rad)
@@ -134,6 +140,9 @@ def run_synthetic(
         for s in seen:
             rng.shuffle(s)  # blobs come in no particular order
         blobs = tuple({"blue": [v for _, v in s]} for s in seen)
+        for e, per_class in enumerate(blobs):
+            keyframe_blobs[obs.index, e] = per_class
+            true_of[obs.index, e] = [k for k, _ in seen[e]]
         t_assoc = time.perf_counter()
         a = assoc.associate(obs.index, (unique[0], unique[1]), (blobs[0], blobs[1]), slam.estimates)
         out.association_seconds += time.perf_counter() - t_assoc
@@ -160,5 +169,15 @@ def run_synthetic(
                 if name is not None and name not in a.confirmed:
                     out.given.append((obs.index, e, name, seen[e][j][0]))
     out.seconds = time.perf_counter() - tick
+    tick = time.perf_counter()
+    final = assoc.associate_final(
+        keyframe_blobs,
+        slam.keyframe_poses(),  # type: ignore[attr-defined]
+        slam.estimates,
+        slam.noise.sigma_rad,  # type: ignore[attr-defined]
+    )
+    out.final_seconds = time.perf_counter() - tick
+    at = {key: iter(names) for key, names in true_of.items()}  # final keeps the blobs' order
+    out.final = [(d, next(at[d.movement, d.end])) for d in final]
     out.estimates_fl = {k: e.mean_fl for k, e in slam.estimates.items() if "#" in k}
     return out

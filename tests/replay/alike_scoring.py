@@ -19,7 +19,13 @@ import numpy as np
 
 from data_schemas.angles import wrap_rad
 from data_schemas.session import shared_classes
-from replay.records import FrameRecord, MethodConfig, MovementRecord, RunInfo
+from replay.records import (
+    AssociationRecord,
+    FrameRecord,
+    MethodConfig,
+    MovementRecord,
+    RunInfo,
+)
 from replay.sinks.summary import SummarySink
 from replay.stages import run_log
 from replay.truth import match_truth
@@ -34,6 +40,7 @@ class Collect:
     run: RunInfo | None = None
     records: list[MovementRecord] = field(default_factory=list)
     frames: list[FrameRecord] = field(default_factory=list)
+    final: AssociationRecord | None = None
 
     def start(self, run: RunInfo) -> None:
         self.run = run
@@ -45,13 +52,21 @@ class Collect:
     def movement(self, record: MovementRecord) -> None:
         self.records.append(record)
 
+    def association(self, record: AssociationRecord) -> None:
+        self.final = record
+
     def finish(self) -> None:
         pass
 
 
 @dataclass(frozen=True)
 class Score:
-    """Association and map figures of one run."""
+    """Association and map figures of one run.
+
+    ``n_final_detections``, ``n_final_named``, ``n_final_correct``, ``n_final_nearest``: the
+    keyframe detections associated again with the final map once the log is processed (every
+    one, those named, those named right, those named after the nearest in bearing).
+    """
 
     n_correct: int
     n_nearest: int
@@ -62,6 +77,10 @@ class Score:
     errors_m: dict[str, float]
     matched: dict[str, str]
     summary: dict[str, Any]
+    n_final_detections: int
+    n_final_named: int
+    n_final_correct: int
+    n_final_nearest: int
 
     @property
     def correct_share(self) -> float:
@@ -106,10 +125,10 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
         for name, rays in rec.named_from.items()
         for movement, end, b in rays
     ]
-    correct = nearest = associated = 0
-    for name, movement, end, b in given:
-        if "#" not in name or movement not in keyframes:
-            continue
+
+    def judge(name: str, movement: int, end: int, b: float) -> tuple[bool, bool]:
+        """Whether the bearing ``b`` given to ``name`` is its matched landmark's (within eps),
+        and whether that landmark is also the class's nearest in bearing."""
         o1, o2 = keyframes[movement]
         d = o2 - o1
         heading = math.atan2(d[1], d[0])
@@ -118,10 +137,23 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
         pts = np.array([truth.landmarks_world[n] for n in trues])
         v = pts - (o1, o2)[end]
         err = np.abs(wrap_rad(np.arctan2(v[:, 1], v[:, 0]) - heading - b))
-        associated += 1
         own = matched.get(name)
-        correct += int(own is not None and err[trues.index(own)] <= eps)
-        nearest += int(trues[int(np.argmin(err))] == own)
+        right = own is not None and bool(err[trues.index(own)] <= eps)
+        return right, trues[int(np.argmin(err))] == own
+
+    correct = nearest = associated = 0
+    for name, movement, end, b in given:
+        if "#" not in name or movement not in keyframes:
+            continue
+        right, near = judge(name, movement, end, b)
+        associated += 1
+        correct += right
+        nearest += near
+    final = collect.final.detections if collect.final is not None else []
+    final_named = [(d.name, d) for d in final if d.name is not None and d.movement in keyframes]
+    final_judged = [judge(n, d.movement, d.end, d.bearing_rad) for n, d in final_named]
+    final_correct = sum(right for right, _ in final_judged)
+    final_nearest = sum(near for _, near in final_judged)
     errors = {n: truth.error_m(t, means[n]) for n, t in matched.items()}
     firsts = [names[0] for names in classes.values()]
     detections = sum(len(f.detections[n].blobs) for f in collect.frames for n in firsts)
@@ -135,4 +167,8 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
         errors,
         matched,
         summary.document,
+        len(final),
+        len(final_named),
+        final_correct,
+        final_nearest,
     )

@@ -13,7 +13,10 @@ import rerun as rr
 from click.testing import CliRunner
 from logfactory import session_doc, write_log
 from mcap.reader import make_reader
+from test_rerun import _read
 
+from data_schemas.codec import validate
+from data_schemas.mcap.read import LogReader
 from recorder.sim.scenario import builtin_scenario
 from replay.cli import cli
 
@@ -110,6 +113,44 @@ def test_derived_log_and_rerun_show_the_names(
     for k in (1, 2):
         assert f"/map/ellipses/blue\\#{k}" in entities and f"/error/blue\\#{k}" in entities
     assert not any("L3" in e or "L4" in e for e in entities if e.startswith("/map/"))
+
+
+def test_every_detection_with_the_final_map_in_summary_derived_log_and_rerun(
+    alike: tuple[dict[str, Any], str], alike_folder: Path
+) -> None:
+    doc, output = alike
+    final = doc["association"]["final_map"]["blue"]
+    # every keyframe blob of the class, each with one status; more named than movement by
+    # movement (the first movements' blobs, before any name, among them)
+    assert final["detections"] == doc["association"]["detections"]["blue"]["at_keyframes"]
+    statuses = ("named", "contested", "unexplained", "not placed")
+    assert sum(final[k] for k in statuses) == final["detections"]
+    assert final["named"] > doc["association"]["detections"]["blue"]["named"]
+    assert sum(final["per_name"].values()) == final["named"]
+    assert set(final["per_name"]) == {"blue#1", "blue#2"}
+    share = round(100 * final["named"] / final["detections"])
+    assert f"({share} % with the final map)" in output
+    # the derived log holds each of them, valid against its schema, as the summary counts
+    with LogReader(alike_folder / "derived.mcap") as reader:
+        msgs = [m.decode() for m in reader.messages(["/pipeline/association"])]
+    assert len(msgs) == 1
+    validate("bslam.Association", msgs[0])
+    rows = msgs[0]["detections"]
+    assert len(rows) == final["detections"]
+    for k in statuses:
+        assert sum(r["status"] == k for r in rows) == final[k]
+    assert all(("name" in r) == (r["status"] == "named") for r in rows)
+    first = [r for r in rows if r["movement"] == 0]  # nothing was named then
+    assert any(r["status"] == "named" for r in first)
+    # Rerun's log says it
+    rrd = alike_folder / "final.rrd"
+    result = CliRunner().invoke(
+        cli, ["replay", str(alike_folder / "alike.mcap"), "--save", str(rrd), "--keyframes-only"]
+    )
+    assert result.exit_code == 0, result.output
+    texts = [t for r in _read(rrd)["/log"] for t in r.get("TextLog:text") or ()]
+    want = f"with the final map, blue: {final['named']} of {final['detections']} detections named"
+    assert any(t.startswith(want) for t in texts), texts
 
 
 def test_coded_landmark_is_mapped_through_the_pipeline(alike: tuple[dict[str, Any], str]) -> None:
