@@ -99,9 +99,10 @@ class AlikeLandmarks:
             if add_history is not None:
                 add_history(name, bearings)
 
-    def final(self, estimator: Estimator) -> list[FinalDetection] | None:
-        """Every keyframe's detections associated with ``estimator``'s final map (None: the
-        estimator does not place its keyframes with their covariances)."""
+    def final(self, estimator: Estimator) -> tuple[list[FinalDetection], dict[str, str]] | None:
+        """Every keyframe's detections associated with ``estimator``'s final map, and what it
+        leaves open per class (None: the estimator does not place its keyframes with their
+        covariances)."""
         keyframe_poses = getattr(estimator, "keyframe_poses", None)
         if keyframe_poses is None:
             return None

@@ -126,12 +126,20 @@ def result_line(doc: dict[str, Any]) -> str:
         seen = sum(c["at_keyframes"] for c in counts)
         if seen:
             text += f", {100 * sum(c['named'] for c in counts) / seen:.0f} % of {seen} detections"
-        final = assoc.get("final_map", {}).values()
-        if sum(c["detections"] for c in final):
-            share = sum(c["named"] for c in final) / sum(c["detections"] for c in final)
+        final = assoc.get("final_map", {})
+        if sum(c["detections"] for c in final.values()):
+            share = sum(c["named"] for c in final.values()) / sum(
+                c["detections"] for c in final.values()
+            )
             text += f" ({100 * share:.0f} % with the final map)"
         if assoc["movements_with_unresolved"]:
             text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
+        missing = [label for label, c in final.items() if "warning" in c]
+        if missing:
+            text += (
+                f"; with the final map, {', '.join(missing)}: detections no name explains, "
+                "though every name is given (a landmark may be missing)"
+            )
         if assoc.get("doubtful"):
             text += (
                 f"; doubtful: {', '.join(assoc['doubtful'])} "

@@ -254,11 +254,15 @@ class AssociationRecord:
         Of the last frame processed.
     detections : list of FinalDetection
         Every keyframe detection of a shared class, its name (if any) and status.
+    reports : dict label -> str
+        Classes whose names are all given but whose detections the final map leaves
+        unexplained too often (:func:`pipeline.association.final.missing_reports`).
     """
 
     timestamp_ns: int
     log_time_ns: int
     detections: Sequence[FinalDetection]
+    reports: Mapping[str, str] = field(default_factory=dict)
 
     def counts(self) -> dict[str, dict[str, int]]:
         """Per class: ``detections`` and how many of them are in each status (``named``,

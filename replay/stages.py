@@ -207,8 +207,12 @@ class Runner:
         final = None if self.alike is None else self.alike.final(self.slam)
         if final is None:
             return
-        record = AssociationRecord(self.state.last_timestamp_ns, self.state.last_log_time_ns, final)
+        record = AssociationRecord(
+            self.state.last_timestamp_ns, self.state.last_log_time_ns, final[0], final[1]
+        )
         logger.info("%s: %s", self.log.name, record.text())
+        for label, text in record.reports.items():
+            logger.warning("%s: %s with the final map: %s", self.log.name, label, text)
         for sink in self.sinks:
             sink.association(record)
 

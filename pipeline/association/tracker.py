@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.assign import GATE_CHI2, Assignment, assign
-from pipeline.association.final import FinalDetection, associate_final
+from pipeline.association.final import FinalDetection, associate_final, missing_reports
 from pipeline.association.hypotheses import (
     FIT_TOL_EPS,
     MIN_PARALLAX_EPS,
@@ -226,22 +226,26 @@ class Associator:
         poses: Mapping[tuple[int, int], KeyframePose],
         mapped: Mapping[str, LandmarkEstimate],
         noise_rad: float | None = None,
-    ) -> list[FinalDetection]:
+    ) -> tuple[list[FinalDetection], dict[str, str]]:
         """Every keyframe's detections associated with the final map (the estimator's
-        ``mapped`` landmarks and keyframe ``poses``) under the names given so far:
-        :func:`pipeline.association.final.associate_final`. ``noise_rad``: the map's bearing
-        noise std (default the one eps implies)."""
+        ``mapped`` landmarks and keyframe ``poses``) under the names given so far
+        (:func:`pipeline.association.final.associate_final`), and per class whose names are
+        all given, a report when the final map leaves too many of its detections unexplained
+        (:func:`pipeline.association.final.missing_reports`). ``noise_rad``: the map's
+        bearing noise std (default the one eps implies)."""
         known = {
             label: [(n, mapped[n]) for n in self.named[label] if n in mapped]
             for label in self.capacity
         }
-        return associate_final(
+        final = associate_final(
             detections,
             poses,
             known,
             noise_rad=self.sigma_rad if noise_rad is None else noise_rad,
             eps_rad=self.eps_rad,
         )
+        full = [c for c, n in self.capacity.items() if len(self.named[c]) >= n]
+        return final, missing_reports(final, full)
 
     # ------------------------------------------------------------------ placement
     def _place(

@@ -200,7 +200,9 @@ class DerivedLogSink:
             if d.name is not None:
                 row["name"] = d.name
             rows.append(row)
-        msg = {"timestamp": stamp_from_ns(record.timestamp_ns), "detections": rows}
+        msg: dict[str, Any] = {"timestamp": stamp_from_ns(record.timestamp_ns), "detections": rows}
+        if record.reports:
+            msg["warnings"] = [{"class": c, "text": t} for c, t in record.reports.items()]
         self._write(record.log_time_ns, "/pipeline/association", msg)
 
     def finish(self) -> None:

@@ -313,6 +313,8 @@ class RerunSink:
             self._send_frames()
         self._set_time(record.log_time_ns, None)
         self.rec.log("log", rr.TextLog(record.text(), level="INFO"))
+        for label, text in record.reports.items():
+            self.rec.log("log", rr.TextLog(f"{label} with the final map: {text}", level="WARN"))
 
     def _log_joint(self, record: MovementRecord) -> None:
         """Placement, residuals, noise estimate and re-initialization (joint estimator only)."""

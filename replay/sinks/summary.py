@@ -21,7 +21,9 @@ name (at their keyframe or later, ``named_from``), the names still ``doubtful`` 
 movement (name -> why: seen too rarely where predicted since named, or bearings that scatter too
 widely), those still ``unconfirmed`` (name -> why), per class ``final_map``: the keyframe
 detections associated again with the final map once the log is processed (``named``,
-``contested``, ``unexplained``, ``not placed``, and ``per_name``) and, for simulated logs,
+``contested``, ``unexplained``, ``not placed``, ``per_name``, and a ``warning`` when every
+name of the class is given but the final map leaves several of its detections unexplained)
+and, for simulated logs,
 ``matched_truth`` (each ``red#k`` matched to the nearest true landmark of its class,
 one-to-one; ``error_m`` is measured against it).
 """
@@ -249,6 +251,8 @@ class SummarySink:
                 if d.name is not None:
                     per_name = final[d.label].setdefault("per_name", {})
                     per_name[d.name] = per_name.get(d.name, 0) + 1
+            for label, text in self._final.reports.items():
+                final[label]["warning"] = text
             self.document["association"]["final_map"] = final
         if self._doubtful:
             self.document["association"]["doubtful"] = dict(sorted(self._doubtful.items()))

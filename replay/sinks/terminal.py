@@ -105,6 +105,8 @@ class TerminalView:
 
     def association(self, record: AssociationRecord) -> None:
         text = f"{self._header}{record.text()}"
+        for label, why in record.reports.items():
+            text += f"; {label}: {why}"
         if self._in_place:
             self._set(1, text)
         else:

@@ -120,6 +120,8 @@ def test_association_goals(benchmark: Any, tmp_path: Path) -> None:
                         s.n_detections,
                         float(np.mean(errs)) if errs else math.nan,
                         max(errs, default=math.nan),
+                        s.n_final_correct,
+                        s.n_final_named,
                     )
                 )
 
@@ -127,8 +129,8 @@ def test_association_goals(benchmark: Any, tmp_path: Path) -> None:
     for r in rows:
         print(
             f"\n{r[0]:9s} seed {r[1]:2d}: named {r[2]}/8 (distinct truths {r[3]}), "
-            f"correct {r[4]}/{r[5]} of {r[6]} detections, mean {100 * r[7]:.1f} cm, "
-            f"worst {100 * r[8]:.1f} cm",
+            f"correct {r[4]}/{r[5]} of {r[6]} detections (with the final map {r[9]}/{r[10]}), "
+            f"mean {100 * r[7]:.1f} cm, worst {100 * r[8]:.1f} cm",
             end="",
         )
     benchmark.extra_info["rows"] = rows

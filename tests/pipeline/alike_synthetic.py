@@ -170,7 +170,7 @@ def run_synthetic(
                     out.given.append((obs.index, e, name, seen[e][j][0]))
     out.seconds = time.perf_counter() - tick
     tick = time.perf_counter()
-    final = assoc.associate_final(
+    final, _ = assoc.associate_final(
         keyframe_blobs,
         slam.keyframe_poses(),  # type: ignore[attr-defined]
         slam.estimates,

@@ -8,7 +8,12 @@ import math
 
 import numpy as np
 
-from pipeline.association.final import associate_final
+from pipeline.association.final import (
+    MISSING_UNEXPLAINED,
+    FinalDetection,
+    associate_final,
+    missing_reports,
+)
 from pipeline.association.predict import predict_bearings
 from pipeline.estimate import LandmarkEstimate
 from pipeline.joint.geometry import KeyframePose
@@ -135,3 +140,25 @@ def test_random_arenas_are_associated_right_and_more_with_sharp_keyframes() -> N
     # rest: landmarks a few degrees apart)
     assert named[0.5 * DEG] >= 0.85
     assert named[0.5 * DEG] >= named[2.0 * DEG] + 0.05
+
+
+def test_unexplained_detections_of_a_full_class_are_reported() -> None:
+    def rows(n_left: int, label: str = "blue") -> list[FinalDetection]:
+        named = [FinalDetection(k, 0, label, 0.1, f"{label}#1", "named") for k in range(5)]
+        left = [
+            FinalDetection(k // 2, k % 2, label, 1.0, None, "unexplained") for k in range(n_left)
+        ]
+        return named + left
+
+    found = missing_reports(rows(MISSING_UNEXPLAINED), ["blue"])
+    assert list(found) == ["blue"]
+    assert found["blue"].startswith(
+        f"{MISSING_UNEXPLAINED} detection(s) of blue at {MISSING_UNEXPLAINED} keyframe(s)"
+    )
+    assert "a landmark may be missing from the map" in found["blue"]
+    assert missing_reports(rows(MISSING_UNEXPLAINED - 1), ["blue"]) == {}
+    # a class with names still to give: its unexplained detections are landmarks not named yet
+    assert missing_reports(rows(10), []) == {}
+    # contested or unplaced detections are no sign of a missing landmark
+    other = [FinalDetection(0, 0, "blue", 0.0, None, s) for s in ("contested", "not placed") * 5]
+    assert missing_reports(other, ["blue"]) == {}

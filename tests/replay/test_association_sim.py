@@ -16,6 +16,9 @@ from alike_scoring import Score, score_log
 from click.testing import CliRunner
 from test_rerun import _read
 
+from data_schemas.codec import validate
+from data_schemas.mcap.read import LogReader
+from pipeline.association.final import MISSING_UNEXPLAINED
 from replay.cli import cli
 from replay.experiments.run import simulate
 
@@ -81,6 +84,8 @@ def test_the_final_map_names_nearly_every_detection_and_names_it_right(scored: S
     assert scored.n_final_named > scored.n_associated
     assert scored.n_final_correct >= 0.98 * scored.n_final_detections
     assert scored.n_final_correct >= 0.995 * scored.n_final_named
+    # every name right and every landmark named: nothing left for a warning
+    assert "warning" not in scored.summary["association"]["final_map"]["blue"]
 
 
 def test_every_landmark_is_mapped_and_none_invented(scored: Score) -> None:
@@ -126,7 +131,7 @@ def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
     # names were also searched for among the unnamed detections
     # (docs/RESULTS.md): 74 and 79 named and no name off on these ten seeds, but more than
     # twice the names off on seeds 161-260, which neither rule was written on.
-    named = off = correct = detections = final = 0
+    named = off = correct = detections = final = false_warnings = 0
     for seed in range(1, 11):
         _, s = _simulated(camera, seed, tmp_path)
         correct += s.n_correct
@@ -135,6 +140,10 @@ def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
         assert len(set(s.matched.values())) == s.n_named <= 8, seed
         wrong = [e for e in s.errors_m.values() if e > 0.10]
         off += len(wrong)
+        if s.n_named == 8:  # the final map warns when a name is off (seed 3), else not
+            warned = "warning" in s.summary["association"]["final_map"]["blue"]
+            false_warnings += warned and not wrong
+            assert warned or not wrong, seed
         if not wrong:
             assert s.correct_share >= 0.97, (seed, s.correct_share)
             assert sum(s.errors_m.values()) / s.n_named <= 0.03, (seed, s.errors_m)
@@ -145,6 +154,7 @@ def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
     assert correct >= 0.85 * detections, (correct, detections)
     # and nearly all with the final map (measured: 98.1 and 96.3 %)
     assert final >= 0.95 * detections, (final, detections)
+    assert false_warnings <= 1  # measured: none
 
 
 @pytest.mark.slow
@@ -294,3 +304,25 @@ def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
     last, _ = _replayed(log, tmp_path)
     labelled = {n.removesuffix(" (unconfirmed)") for n in last if n.endswith(" (unconfirmed)")}
     assert labelled <= set(unconfirmed)  # a name not in the map yet has no label
+
+
+@pytest.mark.slow
+def test_detections_a_name_off_its_landmark_leaves_behind_are_warned_about(
+    tmp_path: Path,
+) -> None:
+    # unwrapped seed 3 names all 8, one of them about 30 cm off, where rays of several
+    # landmarks meet: the landmark it should be stays out of the map, and its blobs are left
+    # unexplained by the final map
+    log, s, _ = _off_names("unwrapped", 3, tmp_path)
+    final = s.summary["association"]["final_map"]["blue"]
+    assert s.n_named == 8 and final["unexplained"] >= MISSING_UNEXPLAINED
+    assert "a landmark may be missing from the map" in final["warning"]
+    out = tmp_path / "derived.mcap"
+    result = CliRunner().invoke(cli, ["process", str(log), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "with the final map, blue: detections no name explains" in result.output
+    assert f"blue with the final map: {final['warning']}" in result.output  # a warning line
+    with LogReader(out) as reader:
+        msg = next(m.decode() for m in reader.messages(["/pipeline/association"]))
+    validate("bslam.Association", msg)
+    assert msg["warnings"] == [{"class": "blue", "text": final["warning"]}]
