@@ -283,7 +283,7 @@ class AssociationRecord:
                 f"{label}: {c['named']} of {c['detections']} detections named"
                 + (f" ({rest})" if rest else "")
             )
-        return "with the final map, " + "; ".join(parts)
+        return "with the final map, " + ("; ".join(parts) or "no detections to associate")
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.angles import wrap_rad
 from pipeline.association.assign import assign
+from pipeline.association.hypotheses import FIT_TOL_EPS, MIN_PARALLAX_EPS
 from pipeline.association.predict import MAX_PRED_STD_EPS, predict_bearings, predict_ranges
 from pipeline.estimate import LandmarkEstimate
 from pipeline.joint.geometry import KeyframePose
@@ -42,6 +44,8 @@ FINAL_MARGIN_CHI2 = 4.0
 #: seeds 161-420: 3 or more in each of the 17 runs with 8 names of which one was more than
 #: 10 cm off its landmark, and in 17 of the 465 runs whose 8 names were right).
 MISSING_UNEXPLAINED = 3
+#: ... and where their rays meet is said when rays of this many keyframes pass within eps of it.
+MISSING_KEYFRAMES = 4
 
 #: What became of one detection: given a name, contested by several named landmarks, explained
 #: by none, or at a keyframe the map does not hold.
@@ -160,9 +164,16 @@ def _assign(
     return [(int(sharp[i]), j) for i, j in a.pairs], sorted(a.contested_detections)
 
 
-def missing_reports(detections: Sequence[FinalDetection], full: Sequence[str]) -> dict[str, str]:
+def missing_reports(
+    detections: Sequence[FinalDetection],
+    full: Sequence[str],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    eps_rad: float,
+) -> dict[str, str]:
     """Per class of ``full`` (every name of it given) with at least
-    :data:`MISSING_UNEXPLAINED` detections left unexplained by the final map: what to say.
+    :data:`MISSING_UNEXPLAINED` detections left unexplained by the final map: what to say,
+    with where their rays meet (:func:`meeting_point`, keyframes from ``poses``) when rays of
+    :data:`MISSING_KEYFRAMES` keyframes or more do.
 
     Returns
     -------
@@ -172,12 +183,86 @@ def missing_reports(detections: Sequence[FinalDetection], full: Sequence[str]) -
     out = {}
     for label in full:
         left = [d for d in detections if d.label == label and d.status == "unexplained"]
-        if len(left) >= MISSING_UNEXPLAINED:
-            keyframes = len({(d.movement, d.end) for d in left})
-            out[label] = (
-                f"{len(left)} detection(s) of {label} at {keyframes} keyframe(s) explained by no "
-                f"named landmark with the final map, though every name of {label} is given: a "
-                "landmark may be missing from the map, and a name may stand where rays of "
-                "several landmarks meet"
-            )
+        if len(left) < MISSING_UNEXPLAINED:
+            continue
+        keyframes = len({(d.movement, d.end) for d in left})
+        text = (
+            f"{len(left)} detection(s) of {label} at {keyframes} keyframe(s) explained by no "
+            f"named landmark with the final map, though every name of {label} is given: a "
+            "landmark may be missing from the map, and a name may stand where rays of "
+            "several landmarks meet"
+        )
+        rays = [
+            (p.origin_fl, p.heading_rad + d.bearing_rad, 2 * d.movement + d.end)
+            for d in left
+            if (p := poses.get((d.movement, d.end))) is not None
+        ]
+        met = meeting_point(rays, eps_rad)
+        if met is not None and met[1] >= MISSING_KEYFRAMES:
+            text += f" (rays of {met[1]} keyframes meet near ({met[0][0]:.2f}, {met[0][1]:.2f}) FL)"
+        out[label] = text
     return out
+
+
+def meeting_point(
+    rays: Sequence[tuple[NDArray[np.float64], float, int]], eps_rad: float
+) -> tuple[NDArray[np.float64], int] | None:
+    """Where the most keyframes' rays pass within eps of one point.
+
+    Parameters
+    ----------
+    rays : list of (origin_fl (2,), direction_rad, keyframe id)
+        Rays in FL.
+    eps_rad : float
+        Bearing error bound: a ray passes near a point when within it; two rays cross usefully
+        with at least :data:`pipeline.association.hypotheses.MIN_PARALLAX_EPS` eps between
+        them.
+
+    Returns
+    -------
+    (point_fl (2,), keyframes) or None
+        The crossing of two rays of different keyframes (ahead of both) that the most keyframes
+        have a ray within eps of, moved to the least-squares point of those rays (one per
+        keyframe, the nearest); None when no two rays cross.
+    """
+    if len(rays) < 2:
+        return None
+    origin = np.array([r[0] for r in rays], np.float64).reshape(-1, 2)
+    direction = np.array([r[1] for r in rays], np.float64)
+    frame = np.array([r[2] for r in rays], np.int64)
+    unit = np.column_stack((np.cos(direction), np.sin(direction)))
+    a, b = np.triu_indices(len(rays), 1)
+    keep = (frame[a] != frame[b]) & (
+        np.abs(wrap_rad(direction[a] - direction[b])) >= MIN_PARALLAX_EPS * eps_rad
+    )
+    a, b = a[keep], b[keep]
+    cross = unit[a, 0] * unit[b, 1] - unit[a, 1] * unit[b, 0]
+    d = origin[b] - origin[a]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # parallel: no crossing
+        t1 = (d[:, 0] * unit[b, 1] - d[:, 1] * unit[b, 0]) / cross
+        t2 = (d[:, 0] * unit[a, 1] - d[:, 1] * unit[a, 0]) / cross
+    ahead = (t1 > 0.0) & (t2 > 0.0)
+    if not ahead.any():
+        return None
+    points = origin[a[ahead]] + t1[ahead, None] * unit[a[ahead]]
+
+    def nearest_per_frame(point: NDArray[np.float64]) -> NDArray[np.int64]:
+        v = point - origin
+        err = np.abs(wrap_rad(np.arctan2(v[:, 1], v[:, 0]) - direction))
+        err = np.where((v * unit).sum(axis=1) > 0.0, err, np.inf)
+        best: dict[int, int] = {}
+        for i in np.flatnonzero(err <= FIT_TOL_EPS * eps_rad):
+            f = int(frame[i])
+            if f not in best or err[i] < err[best[f]]:
+                best[f] = int(i)
+        return np.array(sorted(best.values()), np.int64)
+
+    counts = [nearest_per_frame(p).size for p in points]
+    point = points[int(np.argmax(counts))]
+    near = nearest_per_frame(point)
+    # least squares: the point nearest (perpendicular distance) to the rays it gathered
+    normal = np.column_stack((-unit[near, 1], unit[near, 0]))
+    lhs = normal.T @ normal
+    if abs(float(np.linalg.det(lhs))) > 1e-12:
+        point = np.linalg.solve(lhs, normal.T @ (normal * origin[near]).sum(axis=1))
+    return point, int(nearest_per_frame(point).size)

@@ -245,7 +245,7 @@ class Associator:
             eps_rad=self.eps_rad,
         )
         full = [c for c, n in self.capacity.items() if len(self.named[c]) >= n]
-        return final, missing_reports(final, full)
+        return final, missing_reports(final, full, poses, self.eps_rad)
 
     # ------------------------------------------------------------------ placement
     def _place(

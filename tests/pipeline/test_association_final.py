@@ -12,6 +12,7 @@ from pipeline.association.final import (
     MISSING_UNEXPLAINED,
     FinalDetection,
     associate_final,
+    meeting_point,
     missing_reports,
 )
 from pipeline.association.predict import predict_bearings
@@ -143,22 +144,54 @@ def test_random_arenas_are_associated_right_and_more_with_sharp_keyframes() -> N
 
 
 def test_unexplained_detections_of_a_full_class_are_reported() -> None:
-    def rows(n_left: int, label: str = "blue") -> list[FinalDetection]:
-        named = [FinalDetection(k, 0, label, 0.1, f"{label}#1", "named") for k in range(5)]
+    def rows(n_left: int) -> list[FinalDetection]:
+        named = [FinalDetection(k, 0, "blue", 0.1, "blue#1", "named") for k in range(5)]
         left = [
-            FinalDetection(k // 2, k % 2, label, 1.0, None, "unexplained") for k in range(n_left)
+            FinalDetection(k // 2, k % 2, "blue", 1.0, None, "unexplained") for k in range(n_left)
         ]
         return named + left
 
-    found = missing_reports(rows(MISSING_UNEXPLAINED), ["blue"])
+    eps = 3 * DEG
+    found = missing_reports(rows(MISSING_UNEXPLAINED), ["blue"], {}, eps)
     assert list(found) == ["blue"]
     assert found["blue"].startswith(
         f"{MISSING_UNEXPLAINED} detection(s) of blue at {MISSING_UNEXPLAINED} keyframe(s)"
     )
     assert "a landmark may be missing from the map" in found["blue"]
-    assert missing_reports(rows(MISSING_UNEXPLAINED - 1), ["blue"]) == {}
+    assert "meet near" not in found["blue"]  # no keyframe placed: nowhere to say
+    assert missing_reports(rows(MISSING_UNEXPLAINED - 1), ["blue"], {}, eps) == {}
     # a class with names still to give: its unexplained detections are landmarks not named yet
-    assert missing_reports(rows(10), []) == {}
+    assert missing_reports(rows(10), [], {}, eps) == {}
     # contested or unplaced detections are no sign of a missing landmark
     other = [FinalDetection(0, 0, "blue", 0.0, None, s) for s in ("contested", "not placed") * 5]
-    assert missing_reports(other, ["blue"]) == {}
+    assert missing_reports(other, ["blue"], {}, eps) == {}
+
+
+def _rays_to(
+    point: np.ndarray, n: int, rng: np.random.Generator
+) -> list[tuple[np.ndarray, float, int]]:
+    origins = rng.uniform((-1.0, -1.0), (1.0, 1.0), (n, 2))
+    v = point - origins
+    noise = np.clip(rng.normal(0.0, 1.0 * DEG, n), -3 * DEG, 3 * DEG)
+    return [
+        (o, float(a), k)
+        for k, (o, a) in enumerate(zip(origins, np.arctan2(v[:, 1], v[:, 0]) + noise, strict=True))
+    ]
+
+
+def test_the_rays_of_a_missing_landmark_are_found_among_strays() -> None:
+    rng = np.random.default_rng(4)
+    point = np.array([0.4, 1.7])
+    rays = _rays_to(point, 8, rng)
+    # strays: blobs of other landmarks, from the same keyframes and others
+    rays += [(rng.uniform(-1, 1, 2), float(rng.uniform(-np.pi, np.pi)), k) for k in range(4, 10)]
+    met = meeting_point(rays, 3 * DEG)
+    assert met is not None
+    assert met[1] == 8 and np.hypot(*(met[0] - point)) < 0.05
+    # the report says where, once enough keyframes agree
+    poses = {(k, 0): KeyframePose(o, 0.0, np.zeros((3, 3))) for o, _, k in rays[:8]}
+    rows = [FinalDetection(k, 0, "blue", a, None, "unexplained") for _, a, k in rays[:8]]
+    text = missing_reports(rows, ["blue"], poses, 3 * DEG)["blue"]
+    assert text.endswith(f"(rays of 8 keyframes meet near ({met[0][0]:.2f}, {met[0][1]:.2f}) FL)")
+    # parallel rays (one line of sight) meet nowhere
+    assert meeting_point([(np.zeros(2), 0.3, 0), (np.array([0.0, 0.1]), 0.3, 1)], 3 * DEG) is None

@@ -48,3 +48,9 @@ def test_the_terminal_view_prints_the_line_when_not_a_terminal() -> None:
     view.start(RunInfo("run.mcap", session_from_doc(session_doc()), MethodConfig(), None))
     view.association(_record())
     assert out.getvalue() == f"run.mcap: {_record().text()}\n"
+
+
+def test_a_run_without_keyframe_detections_says_so() -> None:
+    record = AssociationRecord(0, 0, [])
+    assert record.counts() == {}
+    assert record.text() == "with the final map, no detections to associate"
