@@ -13,6 +13,7 @@ associates every keyframe's detections again with the final map
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 
 from data_schemas.session import Session, shared_classes
 from pipeline.association import Associator, MovementAssociation, pose_between
@@ -99,17 +100,53 @@ class AlikeLandmarks:
             if add_history is not None:
                 add_history(name, bearings)
 
-    def final(self, estimator: Estimator) -> tuple[list[FinalDetection], dict[str, str]] | None:
-        """Every keyframe's detections associated with ``estimator``'s final map, and what it
-        leaves open per class (None: the estimator does not place its keyframes with their
-        covariances)."""
+    def final(self, estimator: Estimator) -> FinalAssociation | None:
+        """Every keyframe's detections associated with ``estimator``'s final map and what it
+        leaves open per class; when the unexplained ones point at a landmark a full catalog
+        kept out, the most doubtful name is retracted and given to it, the estimator settles
+        (:meth:`pipeline.joint.JointSlam.settle`) and the association is made again (None:
+        the estimator does not place its keyframes with their covariances)."""
         keyframe_poses = getattr(estimator, "keyframe_poses", None)
         if keyframe_poses is None:
             return None
         noise = getattr(estimator, "noise", None)
-        return self.associator.associate_final(
-            self.keyframe_blobs,
-            keyframe_poses(),
-            estimator.estimates,
-            None if noise is None else noise.sigma_rad,
-        )
+
+        def associate() -> tuple[list[FinalDetection], dict[str, str]]:
+            return self.associator.associate_final(
+                self.keyframe_blobs,
+                keyframe_poses(),
+                estimator.estimates,
+                None if noise is None else noise.sigma_rad,
+            )
+
+        detections, reports = associate()
+        last = max((m for m, _ in self.keyframe_blobs), default=-1)
+        settle = getattr(estimator, "settle", None)
+        repair = None
+        if reports and settle is not None:
+            repair = self.associator.repair_final(
+                detections, keyframe_poses(), estimator.estimates, last
+            )
+        if repair is None or settle is None:
+            return FinalAssociation(detections, reports)
+        for name in repair.retracted:
+            estimator.forget(name)
+        add_history = getattr(estimator, "add_history", None)
+        for name, bearings in repair.history.items():
+            if add_history is not None:
+                add_history(name, bearings)
+        settle()
+        detections, reports = associate()
+        return FinalAssociation(detections, reports, dict(repair.retracted), True)
+
+
+@dataclass(frozen=True)
+class FinalAssociation:
+    """What :meth:`AlikeLandmarks.final` found: every keyframe detection with the final map,
+    the reports per class, the names retracted and given anew once the log was processed
+    (name -> why), and whether that changed the map."""
+
+    detections: list[FinalDetection]
+    reports: dict[str, str]
+    retracted: dict[str, str] = field(default_factory=dict)
+    map_changed: bool = False

@@ -134,6 +134,12 @@ def result_line(doc: dict[str, Any]) -> str:
             text += f" ({100 * share:.0f} % with the final map)"
         if assoc["movements_with_unresolved"]:
             text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
+        retracted = [n for c in final.values() for n in c.get("retracted", {})]
+        if retracted:
+            text += (
+                f"; with the final map, {', '.join(retracted)} given to the landmark the "
+                "unexplained detections point at (doubtful before)"
+            )
         missing = [label for label, c in final.items() if "warning" in c]
         if missing:
             text += (

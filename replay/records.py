@@ -257,12 +257,19 @@ class AssociationRecord:
     reports : dict label -> str
         Classes whose names are all given but whose detections the final map leaves
         unexplained too often (:func:`pipeline.association.final.missing_reports`).
+    retracted : dict name -> str
+        Doubtful names taken back once the log was processed and given to a landmark the
+        final map's unexplained detections point at, with why.
+    estimates : dict name -> EstimateRecord, or None
+        The map after that (None: the last movement's map stands).
     """
 
     timestamp_ns: int
     log_time_ns: int
     detections: Sequence[FinalDetection]
     reports: Mapping[str, str] = field(default_factory=dict)
+    retracted: Mapping[str, str] = field(default_factory=dict)
+    estimates: Mapping[str, EstimateRecord] | None = None
 
     def counts(self) -> dict[str, dict[str, int]]:
         """Per class: ``detections`` and how many of them are in each status (``named``,

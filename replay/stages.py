@@ -207,10 +207,25 @@ class Runner:
         final = None if self.alike is None else self.alike.final(self.slam)
         if final is None:
             return
+        estimates = None
+        if final.map_changed:
+            reference = self.session.reference
+            estimates = {
+                n: _estimate_record(e.mean_fl, e.cov_fl, e.credible_ellipse(CREDIBLE_P))
+                for n, e in self.slam.estimates.items()
+                if n not in reference
+            }
         record = AssociationRecord(
-            self.state.last_timestamp_ns, self.state.last_log_time_ns, final[0], final[1]
+            self.state.last_timestamp_ns,
+            self.state.last_log_time_ns,
+            final.detections,
+            final.reports,
+            final.retracted,
+            estimates,
         )
         logger.info("%s: %s", self.log.name, record.text())
+        for name, why in record.retracted.items():
+            logger.warning("%s: with the final map, %s %s", self.log.name, name, why)
         for label, text in record.reports.items():
             logger.warning("%s: %s with the final map: %s", self.log.name, label, text)
         for sink in self.sinks:

@@ -54,7 +54,12 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.assign import GATE_CHI2, Assignment, assign
-from pipeline.association.final import FinalDetection, associate_final, missing_reports
+from pipeline.association.final import (
+    FinalDetection,
+    associate_final,
+    meeting_point,
+    missing_reports,
+)
 from pipeline.association.hypotheses import (
     FIT_TOL_EPS,
     MIN_PARALLAX_EPS,
@@ -246,6 +251,56 @@ class Associator:
         )
         full = [c for c, n in self.capacity.items() if len(self.named[c]) >= n]
         return final, missing_reports(final, full, poses, self.eps_rad)
+
+    def repair_final(
+        self,
+        final: Sequence[FinalDetection],
+        poses: Mapping[tuple[int, int], KeyframePose],
+        mapped: Mapping[str, LandmarkEstimate],
+        index: int,
+    ) -> MovementAssociation | None:
+        """Once the log is processed: per class whose names are all given, when the final
+        map leaves detections unexplained whose rays meet at one point as a search names a
+        landmark (:data:`DISCOVER_KEYFRAMES` keyframes, :data:`DISCOVER_LINES` lines of
+        sight, every ray within eps, not mostly a named landmark's), the most doubtful name is
+        retracted and given to that point (as :meth:`hypothesize` does with a full catalog).
+
+        ``final`` is :meth:`associate_final`'s association, ``poses`` and ``mapped`` the final
+        map, ``index`` the last movement. Returns what changed (``retracted``, ``confirmed``,
+        ``history``: the estimator forgets the retracted landmarks, takes the history and
+        settles), or None when nothing did."""
+        out = MovementAssociation(index + 1)  # after the last movement: no ray is its own
+        tol = FIT_TOL_EPS * self.eps_rad
+        for label, n in self.capacity.items():
+            if len(self.named[label]) < n or self._most_doubtful(label) is None:
+                continue
+            left = [d for d in final if d.label == label and d.status == "unexplained"]
+            rays = [
+                self._ray(d.movement, d.end, j, d.bearing_rad, p.origin_fl, p.heading_rad)
+                for j, d in enumerate(left)
+                if (p := poses.get((d.movement, d.end))) is not None
+            ]
+            met = meeting_point(
+                [(np.asarray(r.origin_fl), r.direction_rad, 2 * r.movement + r.end) for r in rays],
+                self.eps_rad,
+            )
+            if met is None:
+                continue
+            rs = _RaySet(rays)
+            found = rs.nearest_per_keyframe(rs.errors(met[0][None, :])[0], tol)
+            if len(found) < DISCOVER_KEYFRAMES:
+                continue
+            h = fit(label, found, self.eps_rad, self.sigma_rad, met[0])
+            if h is None or (lines := h.lines_of_sight(self._distinct)) < DISCOVER_LINES:
+                continue
+            if any(
+                2 * sum(self._ray_fits(r, e) for r in h.rays) > len(h.rays)
+                for _, e in self._known(label, mapped)
+            ):
+                continue  # mostly bearings of a named landmark: that one, left unexplained
+            out.names[label] = ([], [])
+            self._give_name(label, h, lines, out, searched=True)
+        return out if out.confirmed else None
 
     # ------------------------------------------------------------------ placement
     def _place(

@@ -906,6 +906,19 @@ class JointSlam:
             if movement in self._placed:  # a waiting movement brings it when placed
                 self._pending.setdefault(name, []).append(bearing)
 
+    def settle(self) -> list[str]:
+        """Enter the landmarks whose bearings wait (given by :meth:`add_history` after the
+        last movement) and update the map, without a movement; their names."""
+        if not self._placed or not self._pending:
+            return []
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        entered = self._enter_pending(graph, values)
+        if entered:
+            self._update(graph, values)
+            self._reject_outliers()
+            self._update_estimates()
+        return entered
+
     # ------------------------------------------------------------------ one movement
     def process_movement(self, obs: MovementObservation) -> JointMovementResult:
         """Initialize with the paper's filter, place the movement, add its bearings, update."""

@@ -203,6 +203,13 @@ class DerivedLogSink:
         msg: dict[str, Any] = {"timestamp": stamp_from_ns(record.timestamp_ns), "detections": rows}
         if record.reports:
             msg["warnings"] = [{"class": c, "text": t} for c, t in record.reports.items()]
+        if record.retracted:
+            msg["retracted"] = [{"name": n, "text": t} for n, t in record.retracted.items()]
+        if record.estimates is not None:
+            msg["landmarks"] = [
+                {"name": n, "mean": e.mean_fl.tolist(), "cov": _cov_xy(e.cov_fl)}
+                for n, e in record.estimates.items()
+            ]
         self._write(record.log_time_ns, "/pipeline/association", msg)
 
     def finish(self) -> None:

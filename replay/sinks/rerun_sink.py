@@ -36,7 +36,7 @@ FL are drawn with y up while the logged values stay in their frame.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +48,13 @@ from data_schemas.colors import NOMINAL_BGR
 from data_schemas.session import Session, shared_classes
 from pipeline.association.tracker import slot_name
 from replay.fig1 import log_fig1
-from replay.records import AssociationRecord, FrameRecord, MovementRecord, RunInfo
+from replay.records import (
+    AssociationRecord,
+    EstimateRecord,
+    FrameRecord,
+    MovementRecord,
+    RunInfo,
+)
 from replay.truth import errors_m
 
 LOG_TIME = "log_time"
@@ -165,6 +171,9 @@ class RerunSink:
         self._run: RunInfo | None = None
         self._rgb: dict[str, tuple[int, int, int]] = {}
         self._trajectory_fl: list[NDArray[np.float64]] = []
+        self._doubtful: dict[str, str] = {}
+        self._unconfirmed: dict[str, str] = {}
+        self._last_movement: int | None = None
         self._truth_trajectory_fl: list[NDArray[np.float64]] = []
         self._batch = _FrameBatch()
 
@@ -297,6 +306,7 @@ class RerunSink:
         if self._live and self._batch.log_time_ns:
             self._send_frames()
         self._set_time(record.log_time_ns, record.index)
+        self._last_movement = record.index
         log = self.rec.log
         if not record.ok:
             log("log", rr.TextLog(f"movement {record.index}: {record.status}", level="WARN"))
@@ -311,8 +321,17 @@ class RerunSink:
     def association(self, record: AssociationRecord) -> None:
         if self._live and self._batch.log_time_ns:
             self._send_frames()
-        self._set_time(record.log_time_ns, None)
+        # with the last movement on its timeline: logged after it, the final map wins there
+        self._set_time(record.log_time_ns, self._last_movement)
         self.rec.log("log", rr.TextLog(record.text(), level="INFO"))
+        for name, why in record.retracted.items():
+            self.rec.log("log", rr.TextLog(f"with the final map, {name} {why}", level="WARN"))
+            self._doubtful.pop(name, None)
+            self._unconfirmed.pop(name, None)
+        if record.estimates is not None and self._run is not None:
+            names = [n for n in record.estimates if n not in self._run.session.reference]
+            self._log_map(record.estimates, names)
+            self._log_errors(record.estimates, names, self._run)
         for label, text in record.reports.items():
             self.rec.log("log", rr.TextLog(f"{label} with the final map: {text}", level="WARN"))
 
@@ -367,21 +386,9 @@ class RerunSink:
                 log(f"map/particles/{name}", rr.Clear(recursive=False))
         names = [n for n in record.estimates if n not in run.session.reference]
         doubtful = record.doubtful_landmarks or {}
-        unconfirmed = record.unconfirmed_landmarks or {}
-        status = {
-            **{n: " (unconfirmed)" for n in unconfirmed},
-            **{n: " (doubtful)" for n in doubtful},
-        }
-        if names:
-            log(
-                "map/estimates",
-                rr.Points2D(
-                    np.array([record.estimates[n].mean_fl for n in names]),
-                    colors=[self._rgb[n] for n in names],
-                    radii=rr.Radius.ui_points(5.0),
-                    labels=[n + status.get(n, "") for n in names],
-                ),
-            )
+        self._doubtful = dict(doubtful)
+        self._unconfirmed = dict(record.unconfirmed_landmarks or {})
+        self._log_map(record.estimates, names)
         for name, why in doubtful.items():
             log("log", rr.TextLog(f"movement {record.index}: {name} doubtful: {why}", level="WARN"))
         for name, rays in record.named_from.items():
@@ -391,17 +398,6 @@ class RerunSink:
                 f"(movements {moves[0]}-{moves[-1]})"
             )
             log("log", rr.TextLog(text, level="INFO"))
-        for n in names:
-            log(
-                f"map/ellipses/{n}",
-                # its own hue and thicker than the particles, so the region shows over its own cloud
-                rr.LineStrips2D(
-                    [record.estimates[n].ellipse80_fl],
-                    colors=[ELLIPSE_RGB],
-                    radii=rr.Radius.ui_points(1.5),
-                    labels=[f"{n} 80%"],
-                ),
-            )
         if record.o1_fl is not None and record.o2_fl is not None:
             log(
                 "map/observation_particles",
@@ -420,12 +416,49 @@ class RerunSink:
             ends = np.array([record.truth_o1_world, record.truth_o2_world])
             self._truth_trajectory_fl.append(truth.to_fl.apply(ends))
             self._log_path("map/truth/trajectory", self._truth_trajectory_fl, TRUTH_RGB, None)
-        means = {n: record.estimates[n].mean_fl for n in names}
-        errors = errors_m(truth, means, shared_classes(run.session.landmarks))
+        self._log_errors(record.estimates, names, run)
+
+    def _log_map(self, estimates: Mapping[str, EstimateRecord], names: Sequence[str]) -> None:
+        """The map's points (labelled, doubtful and unconfirmed names marked) and 80% ellipses."""
+        log = self.rec.log
+        status = {
+            **{n: " (unconfirmed)" for n in self._unconfirmed},
+            **{n: " (doubtful)" for n in self._doubtful},
+        }
+        if names:
+            log(
+                "map/estimates",
+                rr.Points2D(
+                    np.array([estimates[n].mean_fl for n in names]),
+                    colors=[self._rgb[n] for n in names],
+                    radii=rr.Radius.ui_points(5.0),
+                    labels=[n + status.get(n, "") for n in names],
+                ),
+            )
+        for n in names:
+            log(
+                f"map/ellipses/{n}",
+                # its own hue and thicker than the particles, so the region shows over its own cloud
+                rr.LineStrips2D(
+                    [estimates[n].ellipse80_fl],
+                    colors=[ELLIPSE_RGB],
+                    radii=rr.Radius.ui_points(1.5),
+                    labels=[f"{n} 80%"],
+                ),
+            )
+
+    def _log_errors(
+        self, estimates: Mapping[str, EstimateRecord], names: Sequence[str], run: RunInfo
+    ) -> None:
+        """Simulated logs: each landmark's error and their mean (m)."""
+        if run.truth is None:
+            return
+        means = {n: estimates[n].mean_fl for n in names}
+        errors = errors_m(run.truth, means, shared_classes(run.session.landmarks))
         for n, e in errors.items():
-            log(f"error/{n}", rr.Scalars(e))
+            self.rec.log(f"error/{n}", rr.Scalars(e))
         if errors:
-            log("error/mean", rr.Scalars(float(np.mean(list(errors.values())))))
+            self.rec.log("error/mean", rr.Scalars(float(np.mean(list(errors.values())))))
 
     def _log_path(
         self,

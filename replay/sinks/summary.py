@@ -21,8 +21,10 @@ name (at their keyframe or later, ``named_from``), the names still ``doubtful`` 
 movement (name -> why: seen too rarely where predicted since named, or bearings that scatter too
 widely), those still ``unconfirmed`` (name -> why), per class ``final_map``: the keyframe
 detections associated again with the final map once the log is processed (``named``,
-``contested``, ``unexplained``, ``not placed``, ``per_name``, and a ``warning`` when every
-name of the class is given but the final map leaves several of its detections unexplained)
+``contested``, ``unexplained``, ``not placed``, ``per_name``, a ``warning`` when every
+name of the class is given but the final map leaves several of its detections unexplained,
+and ``retracted``: names taken back then and given to the landmark those detections point at,
+whose map is then the document's ``landmarks``)
 and, for simulated logs,
 ``matched_truth`` (each ``red#k`` matched to the nearest true landmark of its class,
 one-to-one; ``error_m`` is measured against it).
@@ -31,6 +33,7 @@ one-to-one; ``error_m`` is measured against it).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -121,7 +124,6 @@ class SummarySink:
 
     def movement(self, record: MovementRecord) -> None:
         assert self._run is not None
-        reference = self._run.session.reference
         entry: dict[str, Any] = {
             "index": record.index,
             "status": record.status,
@@ -181,28 +183,39 @@ class SummarySink:
             if self._unconfirmed:
                 entry["unconfirmed_landmarks"] = dict(self._unconfirmed)
         if record.ok:
-            self._landmarks = {
-                name: _estimate(e) for name, e in record.estimates.items() if name not in reference
-            }
+            self._set_map(record.estimates)
             if record.o1_fl is not None and record.o2_fl is not None:
                 entry["observation_points"] = {
                     "o1": _xy(record.o1_fl.mean(axis=0)),
                     "o2": _xy(record.o2_fl.mean(axis=0)),
                 }
-            if self._run.truth is not None:
-                means = {n: e.mean_fl for n, e in record.estimates.items() if n not in reference}
-                shared = shared_classes(self._run.session.landmarks)
-                self._errors_m = errors_m(self._run.truth, means, shared)
-                if shared:
-                    self._matched = match_truth(self._run.truth, means, shared)
         entry["landmarks"] = self._landmarks
         if self._run.truth is not None and self._errors_m:
             entry["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}
             entry["mean_error_m"] = _num(float(np.mean(list(self._errors_m.values()))))
         self.document["movements"].append(entry)
 
+    def _set_map(self, estimates: Mapping[str, EstimateRecord]) -> None:
+        """The map now: its landmarks and, for simulated logs, their errors."""
+        assert self._run is not None
+        reference = self._run.session.reference
+        self._landmarks = {
+            name: _estimate(e) for name, e in estimates.items() if name not in reference
+        }
+        if self._run.truth is not None:
+            means = {n: e.mean_fl for n, e in estimates.items() if n not in reference}
+            shared = shared_classes(self._run.session.landmarks)
+            self._errors_m = errors_m(self._run.truth, means, shared)
+            if shared:
+                self._matched = match_truth(self._run.truth, means, shared)
+
     def association(self, record: AssociationRecord) -> None:
         self._final = record
+        if record.estimates is not None:
+            self._set_map(record.estimates)
+        for name in record.retracted:
+            self._doubtful.pop(name, None)
+            self._unconfirmed.pop(name, None)
 
     def finish(self) -> None:
         self.document["landmarks"] = self._landmarks
@@ -253,6 +266,10 @@ class SummarySink:
                     per_name[d.name] = per_name.get(d.name, 0) + 1
             for label, text in self._final.reports.items():
                 final[label]["warning"] = text
+            for name, why in self._final.retracted.items():
+                shared_label = class_of_name(name)
+                if shared_label in final:
+                    final[shared_label].setdefault("retracted", {})[name] = why
             self.document["association"]["final_map"] = final
         if self._doubtful:
             self.document["association"]["doubtful"] = dict(sorted(self._doubtful.items()))

@@ -105,6 +105,8 @@ class TerminalView:
 
     def association(self, record: AssociationRecord) -> None:
         text = f"{self._header}{record.text()}"
+        for name, why in record.retracted.items():
+            text += f"; {name} {why}"
         for label, why in record.reports.items():
             text += f"; {label}: {why}"
         if self._in_place:

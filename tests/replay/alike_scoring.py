@@ -66,6 +66,8 @@ class Score:
     ``n_final_detections``, ``n_final_named``, ``n_final_correct``, ``n_final_nearest``: the
     keyframe detections associated again with the final map once the log is processed (every
     one, those named, those named right, those named after the nearest in bearing).
+    ``errors_m`` is measured on the final map (after names retracted once the log was
+    processed), ``errors_last_m`` on the last movement's.
     """
 
     n_correct: int
@@ -81,6 +83,7 @@ class Score:
     n_final_named: int
     n_final_correct: int
     n_final_nearest: int
+    errors_last_m: dict[str, float]
 
     @property
     def correct_share(self) -> float:
@@ -102,7 +105,9 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
     truth, session = collect.run.truth, collect.run.session
     classes = shared_classes(session.landmarks)
     last = next(r for r in reversed(collect.records) if r.ok)
-    means = {n: e.mean_fl for n, e in last.estimates.items() if "#" in n}
+    final_map = collect.final.estimates if collect.final is not None else None
+    estimates = last.estimates if final_map is None else final_map  # the map once processed
+    means = {n: e.mean_fl for n, e in estimates.items() if "#" in n}
     matched = match_truth(truth, means, classes)
     members = {n: label for label, names in classes.items() for n in names}
     eps = session.vision_error_rad
@@ -155,6 +160,11 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
     final_correct = sum(right for right, _ in final_judged)
     final_nearest = sum(near for _, near in final_judged)
     errors = {n: truth.error_m(t, means[n]) for n, t in matched.items()}
+    last_means = {n: e.mean_fl for n, e in last.estimates.items() if "#" in n}
+    errors_last = {
+        n: truth.error_m(t, last_means[n])
+        for n, t in match_truth(truth, last_means, classes).items()
+    }
     firsts = [names[0] for names in classes.values()]
     detections = sum(len(f.detections[n].blobs) for f in collect.frames for n in firsts)
     return Score(
@@ -171,4 +181,5 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
         len(final_named),
         final_correct,
         final_nearest,
+        errors_last,
     )
