@@ -9,8 +9,10 @@ predict each bearing far more sharply, and :func:`associate_final` assigns every
 detections again by the rules of :func:`pipeline.association.assign.assign` (gate, one-to-one
 pairs unique by a margin, :data:`FINAL_MARGIN_CHI2`, the nearest of landmarks in line takes
 their blob). Prediction variance: the point's covariance, the keyframe pose's, and the map's
-estimated bearing noise. The map is not changed. :func:`missing_reports` says when a class
-whose names are all given still has detections no name explains, and where their rays meet.
+estimated bearing noise; the bearings it names are not given to the estimator.
+:func:`missing_reports` says when a class whose names are all given still has detections no
+name explains, and where their rays meet (:func:`meeting_point`;
+:meth:`pipeline.association.Associator.repair_final` may then give a doubtful name there).
 """
 
 from __future__ import annotations
