@@ -262,8 +262,10 @@ class Associator:
         """Once the log is processed: per class whose names are all given, when the final
         map leaves detections unexplained whose rays meet at one point as a search names a
         landmark (:data:`DISCOVER_KEYFRAMES` keyframes, :data:`DISCOVER_LINES` lines of
-        sight, every ray within eps, not mostly a named landmark's), the most doubtful name is
-        retracted and given to that point (as :meth:`hypothesize` does with a full catalog).
+        sight, every ray within eps, not mostly a named landmark's), a doubtful name is
+        retracted and given to that point (as :meth:`hypothesize` does with a full catalog):
+        the one the final association gave a detection at the smallest share of the keyframes
+        where the final map predicts it (:meth:`_final_share`).
 
         ``final`` is :meth:`associate_final`'s association, ``poses`` and ``mapped`` the final
         map, ``index`` the last movement. Returns what changed (``retracted``, ``confirmed``,
@@ -299,8 +301,37 @@ class Associator:
             ):
                 continue  # mostly bearings of a named landmark: that one, left unexplained
             out.names[label] = ([], [])
-            self._give_name(label, h, lines, out, searched=True)
+            weakest = min(
+                (n for n in self.named[label] if self.support[n].doubt() is not None),
+                key=lambda n: self._final_share(n, final, poses, mapped),
+            )
+            self._give_name(label, h, lines, out, searched=True, retract=weakest)
         return out if out.confirmed else None
+
+    def _final_share(
+        self,
+        name: str,
+        final: Sequence[FinalDetection],
+        poses: Mapping[tuple[int, int], KeyframePose],
+        mapped: Mapping[str, LandmarkEstimate],
+    ) -> float:
+        """Share of the keyframes where the final map predicts ``name`` sharply enough to
+        gate at which the final association gave it a detection (1 when not in the map)."""
+        e = mapped.get(name)
+        if e is None or not poses:
+            return 1.0
+        predicted = 0
+        for p in poses.values():
+            _, std = predict_bearings(
+                p.origin_fl,
+                p.heading_rad,
+                e.mean_fl[None, :],
+                e.cov_fl[None, :, :],
+                bearing_var_rad=self.sigma_rad**2,
+                pose_cov=p.cov,
+            )
+            predicted += bool(std[0] <= MAX_PRED_STD_EPS * self.eps_rad)
+        return sum(d.name == name for d in final) / max(predicted, 1)
 
     # ------------------------------------------------------------------ placement
     def _place(
@@ -739,15 +770,16 @@ class Associator:
         out: MovementAssociation,
         *,
         searched: bool = False,
+        retract: str | None = None,
     ) -> bool:
         """Name ``h`` (seen along ``lines`` lines of sight; ``searched``: found by the search
-        among unnamed detections): the next free name of ``label``, or the most doubtful one
-        when the catalog is full (False: none is doubtful; reported)."""
+        among unnamed detections): the next free name of ``label``, or when the catalog is full
+        ``retract`` or else the most doubtful one (False: none is doubtful; reported)."""
         if len(self.named[label]) < self.capacity[label]:
             name = slot_name(label, len(self.named[label]) + 1)
             self.named[label].append(name)
         else:
-            weakest = self._most_doubtful(label)
+            weakest = retract or self._most_doubtful(label)
             if weakest is None:
                 out.unresolved[f"{label} beyond catalog"] = (
                     f"a landmark of {label} fits {len(h.rays)} keyframes at "
