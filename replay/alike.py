@@ -20,7 +20,11 @@ from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.association.final import FinalDetection
 from pipeline.bearings import Detection
 from pipeline.estimators import Estimator
+from pipeline.joint.geometry import KeyframePose
 from pipeline.slam import MovementObservation, MovementResult
+
+#: Keyframe poses of the final map, (movement, end) -> pose.
+Poses = dict[tuple[int, int], KeyframePose]
 
 
 class AlikeLandmarks:
@@ -103,40 +107,40 @@ class AlikeLandmarks:
     def final(self, estimator: Estimator) -> FinalAssociation | None:
         """Every keyframe's detections associated with ``estimator``'s final map and what it
         leaves open per class; when the unexplained ones point at a landmark a full catalog
-        kept out, the most doubtful name is retracted and given to it, the estimator settles
+        kept out, a doubtful name is retracted and given to it
+        (:meth:`pipeline.association.Associator.repair_final`), the estimator settles
         (:meth:`pipeline.joint.JointSlam.settle`) and the association is made again (None:
         the estimator does not place its keyframes with their covariances)."""
         keyframe_poses = getattr(estimator, "keyframe_poses", None)
         if keyframe_poses is None:
             return None
-        noise = getattr(estimator, "noise", None)
 
-        def associate() -> tuple[list[FinalDetection], dict[str, str]]:
-            return self.associator.associate_final(
+        def associate() -> tuple[list[FinalDetection], dict[str, str], Poses]:
+            poses: Poses = keyframe_poses()
+            noise = getattr(estimator, "noise", None)
+            found, reports = self.associator.associate_final(
                 self.keyframe_blobs,
-                keyframe_poses(),
+                poses,
                 estimator.estimates,
                 None if noise is None else noise.sigma_rad,
             )
+            return found, reports, poses
 
-        detections, reports = associate()
-        last = max((m for m, _ in self.keyframe_blobs), default=-1)
+        detections, reports, poses = associate()
         settle = getattr(estimator, "settle", None)
-        repair = None
-        if reports and settle is not None:
-            repair = self.associator.repair_final(
-                detections, keyframe_poses(), estimator.estimates, last
-            )
-        if repair is None or settle is None:
+        add_history = getattr(estimator, "add_history", None)
+        if not reports or settle is None or add_history is None:
+            return FinalAssociation(detections, reports)
+        last = max((m for m, _ in self.keyframe_blobs), default=-1)
+        repair = self.associator.repair_final(detections, poses, estimator.estimates, last)
+        if repair is None:
             return FinalAssociation(detections, reports)
         for name in repair.retracted:
             estimator.forget(name)
-        add_history = getattr(estimator, "add_history", None)
         for name, bearings in repair.history.items():
-            if add_history is not None:
-                add_history(name, bearings)
+            add_history(name, bearings)
         settle()
-        detections, reports = associate()
+        detections, reports, _ = associate()
         return FinalAssociation(detections, reports, dict(repair.retracted), True)
 
 
