@@ -273,8 +273,8 @@ class Associator:
         settles), or None when nothing did."""
         out = MovementAssociation(index + 1)  # after the last movement: no ray is its own
         tol = FIT_TOL_EPS * self.eps_rad
-        for label, n in self.capacity.items():
-            if len(self.named[label]) < n or self._most_doubtful(label) is None:
+        for label, count in self.capacity.items():
+            if len(self.named[label]) < count or self._most_doubtful(label) is None:
                 continue
             left = [d for d in final if d.label == label and d.status == "unexplained"]
             rays = [
