@@ -24,10 +24,9 @@ detections associated again with the final map once the log is processed (``name
 ``contested``, ``unexplained``, ``not placed``, ``per_name``, a ``warning`` when every
 name of the class is given but the final map leaves several of its detections unexplained,
 and ``retracted``: names taken back then and given to the landmark those detections point at,
-whose map is then the document's ``landmarks``)
-and, for simulated logs,
-``matched_truth`` (each ``red#k`` matched to the nearest true landmark of its class,
-one-to-one; ``error_m`` is measured against it).
+whose map is then the document's ``landmarks``) and, for simulated logs, ``matched_truth``
+(each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
+measured against it).
 """
 
 from __future__ import annotations
