@@ -288,7 +288,8 @@ class JointSlam:
         """Every keyframe in the graph, ``(movement, end)`` (end 0: O1, 1: O2), as iSAM2 has it
         now: position and heading (FL) and the covariance of its tangent ``(x, y, heading)``
         in the keyframe's own frame (FL, rad), scaled by the estimated noise as the landmarks'
-        covariances are."""
+        covariances are. A keyframe whose marginal iSAM2 cannot give (an indeterminate
+        system) is left out."""
         scale = 1.0
         if self.noise is not None:
             scale = (self.noise.sigma_rad / self.sigma_model_rad) ** 2
@@ -297,7 +298,10 @@ class JointSlam:
             for end in (0, 1):
                 key = g.pose_key(k, end)
                 p = self._values.atPose2(key)
-                cov = np.asarray(self._isam.marginalCovariance(key), np.float64) * scale
+                try:
+                    cov = np.asarray(self._isam.marginalCovariance(key), np.float64) * scale
+                except RuntimeError:  # GTSAM's indeterminate linear system
+                    continue
                 out[k, end] = KeyframePose(
                     np.array([p.x(), p.y()]), float(p.theta()), 0.5 * (cov + cov.T)
                 )

@@ -554,3 +554,33 @@ def test_a_landmark_given_after_the_last_movement_enters_the_map_when_it_settles
     # one relinearization step)
     assert np.hypot(*(after.mean_fl - before.mean_fl)) < 0.25 * np.sqrt(before.cov_fl.trace())
     np.testing.assert_allclose(after.cov_fl, before.cov_fl, rtol=0.2)
+
+
+def test_keyframe_poses_leave_out_a_keyframe_without_a_marginal() -> None:
+    run = simulate_bearings(4, np.random.default_rng(5), eps_rad=EPS)
+    slam = _slam(run, PAPER_REFERENCE, 0)
+    for obs in run.observations:
+        slam.process_movement(obs)
+    poses = slam.keyframe_poses()
+    assert set(poses) == {(k, e) for k in slam.used_movements for e in (0, 1)}
+    for k, e in poses:
+        mp = slam._movement_pose(k)
+        if e == 0:
+            np.testing.assert_allclose(poses[k, 0].origin_fl, mp.o1_fl, atol=1e-12)
+            assert poses[k, 0].heading_rad == pytest.approx(mp.heading_rad, abs=1e-12)
+        else:  # O2 is a pose of its own in the graph, near the end of O1's heading line
+            assert np.hypot(*(poses[k, 1].origin_fl - mp.o2_fl)) < 1e-3
+        assert np.all(np.linalg.eigvalsh(poses[k, e].cov) > 0.0)
+
+    class Failing:  # iSAM2 that cannot give the marginal of one keyframe
+        def __init__(self, isam: object, bad: int) -> None:
+            self.isam, self.bad = isam, bad
+
+        def marginalCovariance(self, key: int) -> object:
+            if key == self.bad:
+                raise RuntimeError("Indeterminant linear system")
+            return self.isam.marginalCovariance(key)  # type: ignore[attr-defined]
+
+    first = slam.used_movements[0]
+    slam._isam = Failing(slam._isam, joint_estimator.g.pose_key(first, 1))  # type: ignore[assignment]
+    assert set(slam.keyframe_poses()) == set(poses) - {(first, 1)}
