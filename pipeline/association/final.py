@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.assign import assign
-from pipeline.association.hypotheses import FIT_TOL_EPS, MIN_PARALLAX_EPS
+from pipeline.association.hypotheses import FIT_TOL_EPS, MIN_PARALLAX_EPS, Ray, RaySet
 from pipeline.association.predict import MAX_PRED_STD_EPS, predict_bearings, predict_ranges
 from pipeline.estimate import LandmarkEstimate
 from pipeline.joint.geometry import KeyframePose
@@ -195,25 +195,26 @@ def missing_reports(
             "several landmarks meet"
         )
         rays = [
-            (p.origin_fl, p.heading_rad + d.bearing_rad, 2 * d.movement + d.end)
-            for d in left
+            Ray.placed(d.movement, d.end, k, d.bearing_rad, p.origin_fl, p.heading_rad)
+            for k, d in enumerate(left)
             if (p := poses.get((d.movement, d.end))) is not None
         ]
         met = meeting_point(rays, eps_rad)
-        if met is not None and met[1] >= MISSING_KEYFRAMES:
-            text += f" (rays of {met[1]} keyframes meet near ({met[0][0]:.2f}, {met[0][1]:.2f}) FL)"
+        if met is not None and len(met[1]) >= MISSING_KEYFRAMES:
+            x, y = met[0]
+            text += f" (rays of {len(met[1])} keyframes meet near ({x:.2f}, {y:.2f}) FL)"
         out[label] = text
     return out
 
 
 def meeting_point(
-    rays: Sequence[tuple[NDArray[np.float64], float, int]], eps_rad: float
-) -> tuple[NDArray[np.float64], int] | None:
+    rays: Sequence[Ray], eps_rad: float
+) -> tuple[NDArray[np.float64], list[Ray]] | None:
     """Where the most keyframes' rays pass within eps of one point.
 
     Parameters
     ----------
-    rays : list of (origin_fl (2,), direction_rad, keyframe id)
+    rays : list of Ray
         Rays in FL.
     eps_rad : float
         Bearing error bound: a ray passes near a point when within it; two rays cross usefully
@@ -222,49 +223,38 @@ def meeting_point(
 
     Returns
     -------
-    (point_fl (2,), keyframes) or None
+    (point_fl (2,), rays) or None
         The crossing of two rays of different keyframes (ahead of both) that the most keyframes
         have a ray within eps of, moved to the least-squares point of those rays (one per
-        keyframe, the nearest); None when no two rays cross.
+        keyframe, the nearest), and the rays within eps of that point (one per keyframe, the
+        nearest); None when no two rays cross.
     """
     if len(rays) < 2:
         return None
-    origin = np.array([r[0] for r in rays], np.float64).reshape(-1, 2)
-    direction = np.array([r[1] for r in rays], np.float64)
-    frame = np.array([r[2] for r in rays], np.int64)
-    unit = np.column_stack((np.cos(direction), np.sin(direction)))
+    rs = RaySet(rays)
+    tol = FIT_TOL_EPS * eps_rad
     a, b = np.triu_indices(len(rays), 1)
-    keep = (frame[a] != frame[b]) & (
-        np.abs(wrap_rad(direction[a] - direction[b])) >= MIN_PARALLAX_EPS * eps_rad
+    keep = (rs.frames[a] != rs.frames[b]) & (
+        np.abs(wrap_rad(rs.dirs_rad[a] - rs.dirs_rad[b])) >= MIN_PARALLAX_EPS * eps_rad
     )
     a, b = a[keep], b[keep]
-    cross = unit[a, 0] * unit[b, 1] - unit[a, 1] * unit[b, 0]
-    d = origin[b] - origin[a]
+    ua, ub = rs.units[a], rs.units[b]
+    cross = ua[:, 0] * ub[:, 1] - ua[:, 1] * ub[:, 0]
+    d = rs.origins_fl[b] - rs.origins_fl[a]
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # parallel: no crossing
-        t1 = (d[:, 0] * unit[b, 1] - d[:, 1] * unit[b, 0]) / cross
-        t2 = (d[:, 0] * unit[a, 1] - d[:, 1] * unit[a, 0]) / cross
+        t1 = (d[:, 0] * ub[:, 1] - d[:, 1] * ub[:, 0]) / cross
+        t2 = (d[:, 0] * ua[:, 1] - d[:, 1] * ua[:, 0]) / cross
     ahead = (t1 > 0.0) & (t2 > 0.0)
     if not ahead.any():
         return None
-    points = origin[a[ahead]] + t1[ahead, None] * unit[a[ahead]]
-
-    def nearest_per_frame(point: NDArray[np.float64]) -> NDArray[np.int64]:
-        v = point - origin
-        err = np.abs(wrap_rad(np.arctan2(v[:, 1], v[:, 0]) - direction))
-        err = np.where((v * unit).sum(axis=1) > 0.0, err, np.inf)
-        best: dict[int, int] = {}
-        for i in np.flatnonzero(err <= FIT_TOL_EPS * eps_rad):
-            f = int(frame[i])
-            if f not in best or err[i] < err[best[f]]:
-                best[f] = int(i)
-        return np.array(sorted(best.values()), np.int64)
-
-    counts = [nearest_per_frame(p).size for p in points]
-    point = points[int(np.argmax(counts))]
-    near = nearest_per_frame(point)
+    points = rs.origins_fl[a[ahead]] + t1[ahead, None] * ua[ahead]
+    point = points[int(np.argmax(rs.keyframes_within(rs.errors(points), tol)))]
+    near = rs.nearest_per_keyframe(rs.errors(point[None, :])[0], tol)
     # least squares: the point nearest (perpendicular distance) to the rays it gathered
-    normal = np.column_stack((-unit[near, 1], unit[near, 0]))
+    direction = np.array([r.direction_rad for r in near])
+    normal = np.column_stack((-np.sin(direction), np.cos(direction)))
     lhs = normal.T @ normal
     if abs(float(np.linalg.det(lhs))) > 1e-12:
-        point = np.linalg.solve(lhs, normal.T @ (normal * origin[near]).sum(axis=1))
-    return point, int(nearest_per_frame(point).size)
+        origin = np.array([r.origin_fl for r in near], np.float64).reshape(-1, 2)
+        point = np.linalg.solve(lhs, normal.T @ (normal * origin).sum(axis=1))
+    return point, rs.nearest_per_keyframe(rs.errors(point[None, :])[0], tol)

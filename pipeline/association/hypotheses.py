@@ -9,6 +9,7 @@ when none does.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,21 @@ class Ray:
     bearing_rad: float
     origin_fl: tuple[float, float]
     direction_rad: float
+
+    @classmethod
+    def placed(
+        cls,
+        movement: int,
+        end: int,
+        detection: int,
+        bearing_rad: float,
+        origin_fl: NDArray[np.float64],
+        heading_rad: float,
+    ) -> Ray:
+        """Detection ``detection`` (bearing, rad) of keyframe ``(movement, end)`` seen from
+        ``origin_fl`` (2,) with heading ``heading_rad`` (FL)."""
+        origin = (float(origin_fl[0]), float(origin_fl[1]))
+        return cls(movement, end, detection, bearing_rad, origin, heading_rad + bearing_rad)
 
 
 @dataclass
@@ -161,3 +177,41 @@ def _least_squares(
             return None
         px, py = float(x), float(y)
     return np.array([px, py])
+
+
+class RaySet:
+    """Rays sorted by keyframe, as arrays (origins (r, 2), directions (r,), keyframe ids (r,))."""
+
+    def __init__(self, rays: Sequence[Ray]) -> None:
+        frames = np.array([2 * r.movement + r.end for r in rays], np.int64)
+        order = np.argsort(frames, kind="stable")
+        self.rays = [rays[int(i)] for i in order]
+        self.frames = frames[order]
+        self.origins_fl = np.array([r.origin_fl for r in self.rays], np.float64).reshape(-1, 2)
+        self.dirs_rad = np.array([r.direction_rad for r in self.rays], np.float64)
+        self.units = np.column_stack((np.cos(self.dirs_rad), np.sin(self.dirs_rad)))
+        self.starts = np.flatnonzero(np.r_[True, self.frames[1:] != self.frames[:-1]])
+
+    def errors(self, points_fl: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Angle (c, r) between each ray and the direction from its origin to each point (c, 2);
+        inf for a point behind the ray."""
+        d = points_fl[:, None, :] - self.origins_fl[None, :, :]
+        err = np.abs(wrap_rad(np.arctan2(d[..., 1], d[..., 0]) - self.dirs_rad[None, :]))
+        ahead = (d * self.units[None, :, :]).sum(axis=2) > 0.0
+        out: NDArray[np.float64] = np.where(ahead, err, np.inf)
+        return out
+
+    def keyframes_within(self, err: NDArray[np.float64], tol_rad: float) -> NDArray[np.int64]:
+        """Per point (row of ``err`` (c, r)), the keyframes with a ray within ``tol_rad``."""
+        near = (err <= tol_rad).astype(np.int8)
+        out: NDArray[np.int64] = np.maximum.reduceat(near, self.starts, axis=1).sum(axis=1)
+        return out
+
+    def nearest_per_keyframe(self, err: NDArray[np.float64], tol_rad: float) -> list[Ray]:
+        """For one point (``err`` (r,)), each keyframe's ray nearest it, if within ``tol_rad``."""
+        out = []
+        for lo, hi in zip(self.starts, [*self.starts[1:], err.size], strict=True):
+            k = lo + int(np.argmin(err[lo:hi]))
+            if err[k] <= tol_rad:
+                out.append(self.rays[k])
+        return out

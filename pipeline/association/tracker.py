@@ -65,6 +65,7 @@ from pipeline.association.hypotheses import (
     MIN_PARALLAX_EPS,
     Hypothesis,
     Ray,
+    RaySet,
     cannot_meet,
     fit,
 )
@@ -272,27 +273,19 @@ class Associator:
         ``history``: the estimator forgets the retracted landmarks, takes the history and
         settles), or None when nothing did."""
         out = MovementAssociation(index + 1)  # after the last movement: no ray is its own
-        tol = FIT_TOL_EPS * self.eps_rad
         for label, count in self.capacity.items():
             if len(self.named[label]) < count or self._most_doubtful(label) is None:
                 continue
             left = [d for d in final if d.label == label and d.status == "unexplained"]
             rays = [
-                self._ray(d.movement, d.end, j, d.bearing_rad, p.origin_fl, p.heading_rad)
+                Ray.placed(d.movement, d.end, j, d.bearing_rad, p.origin_fl, p.heading_rad)
                 for j, d in enumerate(left)
                 if (p := poses.get((d.movement, d.end))) is not None
             ]
-            met = meeting_point(
-                [(np.asarray(r.origin_fl), r.direction_rad, 2 * r.movement + r.end) for r in rays],
-                self.eps_rad,
-            )
-            if met is None:
+            met = meeting_point(rays, self.eps_rad)
+            if met is None or len(met[1]) < DISCOVER_KEYFRAMES:
                 continue
-            rs = _RaySet(rays)
-            found = rs.nearest_per_keyframe(rs.errors(met[0][None, :])[0], tol)
-            if len(found) < DISCOVER_KEYFRAMES:
-                continue
-            h = fit(label, found, self.eps_rad, self.sigma_rad, met[0])
+            h = fit(label, met[1], self.eps_rad, self.sigma_rad, met[0])
             if h is None or (lines := h.lines_of_sight(self._distinct)) < DISCOVER_LINES:
                 continue
             if any(
@@ -514,7 +507,7 @@ class Associator:
             for end in (0, 1):
                 for j, name in enumerate(out.names[c][end]):
                     if name is not None and name in self.unmapped:
-                        ray = self._ray(
+                        ray = Ray.placed(
                             index, end, j, float(dets[end][j]), origins[end], pose.heading_rad
                         )
                         self.unmapped[name].rays.append(ray)
@@ -654,11 +647,6 @@ class Associator:
         ]
         return np.where(trusted, range_fl, np.nan), range_std_fl
 
-    def _ray(
-        self, index: int, end: int, j: int, b: float, origin: NDArray[np.float64], heading: float
-    ) -> Ray:
-        return Ray(index, end, j, b, (float(origin[0]), float(origin[1])), heading + b)
-
     def _grow(
         self,
         label: str,
@@ -696,7 +684,7 @@ class Associator:
                     continue
                 if hits.size == 1:
                     j = cand[int(hits[0])]
-                    ray = self._ray(index, end, j, float(dets[end][j]), origins[end], heading)
+                    ray = Ray.placed(index, end, j, float(dets[end][j]), origins[end], heading)
                     child = fit(label, [*h.rays, ray], self.eps_rad, self.sigma_rad, h.point_fl)
                     if child is not None:
                         child.misses, child.born = h.misses, h.born
@@ -721,9 +709,9 @@ class Associator:
     ) -> None:
         """One hypothesis per pairing of free detections at O1 and O2 whose rays meet."""
         for i in free[0]:
-            r1 = self._ray(index, 0, i, float(dets[0][i]), origins[0], heading)
+            r1 = Ray.placed(index, 0, i, float(dets[0][i]), origins[0], heading)
             for j in free[1]:
-                r2 = self._ray(index, 1, j, float(dets[1][j]), origins[1], heading)
+                r2 = Ray.placed(index, 1, j, float(dets[1][j]), origins[1], heading)
                 if cannot_meet(r1, r2, self.eps_rad):
                     continue
                 h = fit(label, [r1, r2], self.eps_rad, self.sigma_rad)
@@ -826,13 +814,13 @@ class Associator:
         if full and self._most_doubtful(label) is None:
             return
         rays = [
-            self._ray(m, e, j, b, pose.o2_fl if e else pose.o1_fl, pose.heading_rad)
+            Ray.placed(m, e, j, b, pose.o2_fl if e else pose.o1_fl, pose.heading_rad)
             for m, e, j, b in kept
             if (pose := self._trajectory.get(m)) is not None
         ]
         if len(rays) < DISCOVER_KEYFRAMES:
             return
-        rs = _RaySet(rays)
+        rs = RaySet(rays)
         points = _crossings(rs, out.index, MIN_PARALLAX_EPS * self.eps_rad)
         if points.shape[0] == 0:
             return
@@ -1024,45 +1012,7 @@ def _place_chained(
     return MovementPose(np.asarray(o1_fl, np.float64), heading, t), pos_std
 
 
-class _RaySet:
-    """Rays sorted by keyframe, as arrays (origins (r, 2), directions (r,), keyframe ids (r,))."""
-
-    def __init__(self, rays: Sequence[Ray]) -> None:
-        frames = np.array([2 * r.movement + r.end for r in rays], np.int64)
-        order = np.argsort(frames, kind="stable")
-        self.rays = [rays[int(i)] for i in order]
-        self.frames = frames[order]
-        self.origins_fl = np.array([r.origin_fl for r in self.rays], np.float64).reshape(-1, 2)
-        self.dirs_rad = np.array([r.direction_rad for r in self.rays], np.float64)
-        self.units = np.column_stack((np.cos(self.dirs_rad), np.sin(self.dirs_rad)))
-        self.starts = np.flatnonzero(np.r_[True, self.frames[1:] != self.frames[:-1]])
-
-    def errors(self, points_fl: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Angle (c, r) between each ray and the direction from its origin to each point (c, 2);
-        inf for a point behind the ray."""
-        d = points_fl[:, None, :] - self.origins_fl[None, :, :]
-        err = np.abs(wrap_rad(np.arctan2(d[..., 1], d[..., 0]) - self.dirs_rad[None, :]))
-        ahead = (d * self.units[None, :, :]).sum(axis=2) > 0.0
-        out: NDArray[np.float64] = np.where(ahead, err, np.inf)
-        return out
-
-    def keyframes_within(self, err: NDArray[np.float64], tol_rad: float) -> NDArray[np.int64]:
-        """Per point (row of ``err`` (c, r)), the keyframes with a ray within ``tol_rad``."""
-        near = (err <= tol_rad).astype(np.int8)
-        out: NDArray[np.int64] = np.maximum.reduceat(near, self.starts, axis=1).sum(axis=1)
-        return out
-
-    def nearest_per_keyframe(self, err: NDArray[np.float64], tol_rad: float) -> list[Ray]:
-        """For one point (``err`` (r,)), each keyframe's ray nearest it, if within ``tol_rad``."""
-        out = []
-        for lo, hi in zip(self.starts, [*self.starts[1:], err.size], strict=True):
-            k = lo + int(np.argmin(err[lo:hi]))
-            if err[k] <= tol_rad:
-                out.append(self.rays[k])
-        return out
-
-
-def _crossings(rs: _RaySet, index: int, min_parallax_rad: float) -> NDArray[np.float64]:
+def _crossings(rs: RaySet, index: int, min_parallax_rad: float) -> NDArray[np.float64]:
     """Where each ray at O1 of movement ``index`` crosses each ray at its O2, ahead of both
     with at least ``min_parallax_rad`` between them: points (c, 2) FL."""
     a = np.flatnonzero(rs.frames == 2 * index)

@@ -15,6 +15,7 @@ from pipeline.association.final import (
     meeting_point,
     missing_reports,
 )
+from pipeline.association.hypotheses import Ray
 from pipeline.association.predict import predict_bearings
 from pipeline.estimate import LandmarkEstimate
 from pipeline.joint.geometry import KeyframePose
@@ -167,15 +168,15 @@ def test_unexplained_detections_of_a_full_class_are_reported() -> None:
     assert missing_reports(other, ["blue"], {}, eps) == {}
 
 
-def _rays_to(
-    point: np.ndarray, n: int, rng: np.random.Generator
-) -> list[tuple[np.ndarray, float, int]]:
+def _rays_to(point: np.ndarray, n: int, rng: np.random.Generator) -> list[Ray]:
+    """Rays from keyframes (k, 0), k < n, toward ``point`` with bearing noise (heading 0)."""
     origins = rng.uniform((-1.0, -1.0), (1.0, 1.0), (n, 2))
     v = point - origins
     noise = np.clip(rng.normal(0.0, 1.0 * DEG, n), -3 * DEG, 3 * DEG)
+    bearings = np.arctan2(v[:, 1], v[:, 0]) + noise
     return [
-        (o, float(a), k)
-        for k, (o, a) in enumerate(zip(origins, np.arctan2(v[:, 1], v[:, 0]) + noise, strict=True))
+        Ray.placed(k, 0, 0, float(b), o, 0.0)
+        for k, (o, b) in enumerate(zip(origins, bearings, strict=True))
     ]
 
 
@@ -184,14 +185,26 @@ def test_the_rays_of_a_missing_landmark_are_found_among_strays() -> None:
     point = np.array([0.4, 1.7])
     rays = _rays_to(point, 8, rng)
     # strays: blobs of other landmarks, from the same keyframes and others
-    rays += [(rng.uniform(-1, 1, 2), float(rng.uniform(-np.pi, np.pi)), k) for k in range(4, 10)]
+    rays += [
+        Ray.placed(k, 0, 1, float(rng.uniform(-np.pi, np.pi)), rng.uniform(-1, 1, 2), 0.0)
+        for k in range(4, 10)
+    ]
     met = meeting_point(rays, 3 * DEG)
     assert met is not None
-    assert met[1] == 8 and np.hypot(*(met[0] - point)) < 0.05
+    assert len(met[1]) == 8 and np.hypot(*(met[0] - point)) < 0.05
     # the report says where, once enough keyframes agree
-    poses = {(k, 0): KeyframePose(o, 0.0, np.zeros((3, 3))) for o, _, k in rays[:8]}
-    rows = [FinalDetection(k, 0, "blue", a, None, "unexplained") for _, a, k in rays[:8]]
+    poses = {
+        (r.movement, 0): KeyframePose(np.array(r.origin_fl), 0.0, np.zeros((3, 3)))
+        for r in rays[:8]
+    }
+    rows = [
+        FinalDetection(r.movement, 0, "blue", r.bearing_rad, None, "unexplained") for r in rays[:8]
+    ]
     text = missing_reports(rows, ["blue"], poses, 3 * DEG)["blue"]
     assert text.endswith(f"(rays of 8 keyframes meet near ({met[0][0]:.2f}, {met[0][1]:.2f}) FL)")
     # parallel rays (one line of sight) meet nowhere
-    assert meeting_point([(np.zeros(2), 0.3, 0), (np.array([0.0, 0.1]), 0.3, 1)], 3 * DEG) is None
+    parallel = [
+        Ray.placed(0, 0, 0, 0.3, np.zeros(2), 0.0),
+        Ray.placed(1, 0, 0, 0.3, np.array([0.0, 0.1]), 0.0),
+    ]
+    assert meeting_point(parallel, 3 * DEG) is None

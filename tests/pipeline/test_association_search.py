@@ -9,8 +9,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.association.hypotheses import Ray
-from pipeline.association.tracker import _crossings, _RaySet
+from pipeline.association.hypotheses import Ray, RaySet
+from pipeline.association.tracker import _crossings
 
 EPS = math.radians(3.0)
 ANGLE = st.floats(-math.pi, math.pi, allow_nan=False)
@@ -47,7 +47,7 @@ def test_crossings_are_the_pairs_that_meet_ahead_with_parallax(
     expected = [
         p for a in rays[: len(at_o1)] for b in rays[len(at_o1) : -1] if (p := _crossing_ahead(a, b))
     ]
-    got = _crossings(_RaySet(rays), 3, 2 * EPS)
+    got = _crossings(RaySet(rays), 3, 2 * EPS)
     assert got.shape == (len(expected), 2)
     for p in expected:
         assert np.min(np.hypot(*(got - p).T)) <= 1e-6 * max(1.0, math.hypot(*p))
@@ -65,7 +65,7 @@ def test_keyframes_are_counted_once_whatever_their_rays() -> None:
         _ray(1, 1, (2.0, 0.0), toward((2.0, 0.0))),
         _ray(2, 0, (0.0, 2.0), toward((0.0, 2.0)) + math.pi),
     ]
-    rs = _RaySet(rays)
+    rs = RaySet(rays)
     err = rs.errors(point)
     assert rs.keyframes_within(err, EPS).tolist() == [2]
     nearest = rs.nearest_per_keyframe(err[0], EPS)
