@@ -141,16 +141,15 @@ class AlikeLandmarks:
             add_history(name, bearings)
         settle()
         detections, reports, _ = associate()
-        return FinalAssociation(detections, reports, dict(repair.retracted), True)
+        return FinalAssociation(detections, reports, dict(repair.retracted))
 
 
 @dataclass(frozen=True)
 class FinalAssociation:
     """What :meth:`AlikeLandmarks.final` found: every keyframe detection with the final map,
-    the reports per class, the names retracted and given anew once the log was processed
-    (name -> why), and whether that changed the map."""
+    the reports per class, and the names retracted and given anew once the log was processed
+    (name -> why; the map changed only then)."""
 
     detections: list[FinalDetection]
     reports: dict[str, str]
     retracted: dict[str, str] = field(default_factory=dict)
-    map_changed: bool = False

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Collection, Iterator, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -37,6 +37,7 @@ from data_schemas.registry import IMAGE_SCHEMA, image_encoding
 from data_schemas.session import Session, shared_classes, shared_reference_problem
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import BearingExtractor, Detection, decode_frame
+from pipeline.estimate import LandmarkEstimate
 from pipeline.slam import MovementObservation, MovementResult
 from replay.alike import AlikeLandmarks
 from replay.estimation import estimator_for, joint_fields
@@ -106,13 +107,17 @@ def decode_image(schema: str, msg: dict[str, Any]) -> tuple[NDArray[np.uint8], b
     return image, None
 
 
-def _estimate_record(
-    mean: NDArray[np.float64], cov: NDArray[np.float64], ellipse: Any
-) -> EstimateRecord:
-    outline = np.asarray(ellipse, np.float64)
-    return EstimateRecord(
-        np.asarray(mean, np.float64), np.asarray(cov, np.float64), np.vstack([outline, outline[:1]])
-    )
+def _estimate_records(estimates: Mapping[str, LandmarkEstimate]) -> dict[str, EstimateRecord]:
+    """A map's estimates as records: mean, covariance and closed 80% outline (FL)."""
+    out = {}
+    for name, e in estimates.items():
+        outline = np.asarray(e.credible_ellipse(CREDIBLE_P), np.float64)
+        out[name] = EstimateRecord(
+            np.asarray(e.mean_fl, np.float64),
+            np.asarray(e.cov_fl, np.float64),
+            np.vstack([outline, outline[:1]]),
+        )
+    return out
 
 
 @dataclass
@@ -207,14 +212,7 @@ class Runner:
         final = None if self.alike is None else self.alike.final(self.slam)
         if final is None:
             return
-        estimates = None
-        if final.map_changed:
-            reference = self.session.reference
-            estimates = {
-                n: _estimate_record(e.mean_fl, e.cov_fl, e.credible_ellipse(CREDIBLE_P))
-                for n, e in self.slam.estimates.items()
-                if n not in reference
-            }
+        estimates = _estimate_records(self.slam.estimates) if final.retracted else None
         record = AssociationRecord(
             self.state.last_timestamp_ns,
             self.state.last_log_time_ns,
@@ -414,10 +412,7 @@ class Runner:
             particles_fl=dict(result.belief_fl) if ok else {},
             o1_fl=result.o1_fl if ok else None,
             o2_fl=result.o2_fl if ok else None,
-            estimates={
-                n: _estimate_record(e.mean_fl, e.cov_fl, e.credible_ellipse(CREDIBLE_P))
-                for n, e in result.estimates.items()
-            },
+            estimates=_estimate_records(result.estimates),
             truth_o1_world=self.plan.true_position(start.timestamp_ns),
             truth_o2_world=self.plan.true_position(end.timestamp_ns),
             **joint_fields(result),

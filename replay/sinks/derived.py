@@ -23,7 +23,13 @@ from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import schema_dict
 from data_schemas.stamps import stamp_from_ns
 from pipeline.bearings.detection import Detection
-from replay.records import AssociationRecord, FrameRecord, MovementRecord, RunInfo
+from replay.records import (
+    AssociationRecord,
+    EstimateRecord,
+    FrameRecord,
+    MovementRecord,
+    RunInfo,
+)
 
 
 class SettableClock:
@@ -45,6 +51,14 @@ class SettableClock:
 def _cov_xy(cov: NDArray[np.floating]) -> dict[str, float]:
     """A 2x2 covariance as ``{xx, xy, yy}`` (Foxglove reads no arrays of arrays)."""
     return {"xx": float(cov[0, 0]), "xy": float(cov[0, 1]), "yy": float(cov[1, 1])}
+
+
+def _landmark_rows(estimates: Mapping[str, EstimateRecord]) -> list[dict[str, Any]]:
+    """A map's landmarks as ``/pipeline/estimate`` carries them: name, mean, covariance (FL)."""
+    return [
+        {"name": n, "mean": e.mean_fl.tolist(), "cov": _cov_xy(e.cov_fl)}
+        for n, e in estimates.items()
+    ]
 
 
 def point_set(name: str, points: NDArray[np.floating]) -> dict[str, Any]:
@@ -174,10 +188,7 @@ class DerivedLogSink:
             "skipped_landmarks": [
                 {"name": n, "reason": r} for n, r in record.skipped_landmarks.items()
             ],
-            "landmarks": [
-                {"name": n, "mean": e.mean_fl.tolist(), "cov": _cov_xy(e.cov_fl)}
-                for n, e in record.estimates.items()
-            ],
+            "landmarks": _landmark_rows(record.estimates),
         }
         estimate.update(_joint_fields(record))
         if record.ok and record.o1_fl is not None and record.o2_fl is not None:
@@ -206,10 +217,7 @@ class DerivedLogSink:
         if record.retracted:
             msg["retracted"] = [{"name": n, "text": t} for n, t in record.retracted.items()]
         if record.estimates is not None:
-            msg["landmarks"] = [
-                {"name": n, "mean": e.mean_fl.tolist(), "cov": _cov_xy(e.cov_fl)}
-                for n, e in record.estimates.items()
-            ]
+            msg["landmarks"] = _landmark_rows(record.estimates)
         self._write(record.log_time_ns, "/pipeline/association", msg)
 
     def finish(self) -> None:
