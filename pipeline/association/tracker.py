@@ -41,6 +41,11 @@ For each movement (its two keyframes, O1 and O2):
 Whatever is left unresolved (contested detections, unexplained detections, a class beyond its
 catalog count, a movement that cannot be placed, a doubtful name) is reported in the movement's
 result.
+
+6. Once the log is processed, :meth:`Associator.associate_final` associates every keyframe's
+   detections again with the final map (:mod:`pipeline.association.final`), and
+   :meth:`Associator.repair_final` gives a doubtful name to a landmark the detections it leaves
+   unexplained point at.
 """
 
 from __future__ import annotations
