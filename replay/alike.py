@@ -40,6 +40,9 @@ class AlikeLandmarks:
         )
         #: every keyframe's detections per shared class: (movement, end) -> label -> bearings
         self.keyframe_blobs: dict[tuple[int, int], dict[str, list[float]]] = {}
+        #: ... and its bearings of landmarks of a class of their own: (movement, end) -> name ->
+        #: bearing
+        self.keyframe_unique: dict[tuple[int, int], dict[str, float]] = {}
 
     def landmarks(self, catalog: Sequence[str]) -> list[str]:
         """What the estimator maps: catalog landmarks of their own class, then ``red#k`` names."""
@@ -70,6 +73,7 @@ class AlikeLandmarks:
         )
         for end, per_class in enumerate(blobs):
             self.keyframe_blobs[index, end] = per_class
+            self.keyframe_unique[index, end] = unique[end]
         assoc = self.associator.associate(
             index, (unique[0], unique[1]), (blobs[0], blobs[1]), estimator.estimates
         )
@@ -115,41 +119,45 @@ class AlikeLandmarks:
         if keyframe_poses is None:
             return None
 
-        def associate() -> tuple[list[FinalDetection], dict[str, str], Poses]:
+        def associate() -> tuple[list[FinalDetection], dict[str, str], Poses, list[int]]:
             poses: Poses = keyframe_poses()
             noise = getattr(estimator, "noise", None)
-            found, reports = self.associator.associate_final(
-                self.keyframe_blobs,
-                poses,
-                estimator.estimates,
-                None if noise is None else noise.sigma_rad,
+            sigma = None if noise is None else noise.sigma_rad
+            matched = self.associator.place_left_out(
+                self.keyframe_unique, self.keyframe_blobs, poses, estimator.estimates, sigma
             )
-            return found, reports, poses
+            poses.update(matched)
+            found, reports = self.associator.associate_final(
+                self.keyframe_blobs, poses, estimator.estimates, sigma
+            )
+            return found, reports, poses, sorted({m for m, _ in matched})
 
-        detections, reports, poses = associate()
+        detections, reports, poses, matched = associate()
         settle = getattr(estimator, "settle", None)
         add_history = getattr(estimator, "add_history", None)
         if not reports or settle is None or add_history is None:
-            return FinalAssociation(detections, reports)
+            return FinalAssociation(detections, reports, matched=matched)
         last = max((m for m, _ in self.keyframe_blobs), default=-1)
         repair = self.associator.repair_final(detections, poses, estimator.estimates, last)
         if repair is None:
-            return FinalAssociation(detections, reports)
+            return FinalAssociation(detections, reports, matched=matched)
         for name in repair.retracted:
             estimator.forget(name)
         for name, bearings in repair.history.items():
             add_history(name, bearings)
         settle()
-        detections, reports, _ = associate()
-        return FinalAssociation(detections, reports, dict(repair.retracted))
+        detections, reports, _, matched = associate()
+        return FinalAssociation(detections, reports, dict(repair.retracted), matched)
 
 
 @dataclass(frozen=True)
 class FinalAssociation:
     """What :meth:`AlikeLandmarks.final` found: every keyframe detection with the final map,
-    the reports per class, and the names retracted and given anew once the log was processed
-    (name -> why; the map changed only then)."""
+    the reports per class, the names retracted and given anew once the log was processed
+    (name -> why; the map changed only then), and the movements the map left out that were
+    placed by matching for this association."""
 
     detections: list[FinalDetection]
     reports: dict[str, str]
     retracted: dict[str, str] = field(default_factory=dict)
+    matched: list[int] = field(default_factory=list)

@@ -131,7 +131,13 @@ def result_line(doc: dict[str, Any]) -> str:
             share = sum(c["named"] for c in final.values()) / sum(
                 c["detections"] for c in final.values()
             )
-            text += f" ({100 * share:.0f} % with the final map)"
+            matched = assoc.get("placed_by_matching", [])
+            also = (
+                f", movement(s) {', '.join(map(str, matched))} placed by matching"
+                if matched
+                else ""
+            )
+            text += f" ({100 * share:.0f} % with the final map{also})"
         if assoc["movements_with_unresolved"]:
             text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
         retracted = [n for c in final.values() for n in c.get("retracted", {})]

@@ -262,6 +262,9 @@ class AssociationRecord:
         final map's unexplained detections point at, with why.
     estimates : dict name -> EstimateRecord, or None
         The map after that (None: the last movement's map stands).
+    placed_by_matching : list of int
+        Movements the map left out, placed for this association by matching their detections
+        with the final map (:func:`pipeline.association.match.place_left_out`).
     """
 
     timestamp_ns: int
@@ -270,6 +273,7 @@ class AssociationRecord:
     reports: Mapping[str, str] = field(default_factory=dict)
     retracted: Mapping[str, str] = field(default_factory=dict)
     estimates: Mapping[str, EstimateRecord] | None = None
+    placed_by_matching: Sequence[int] = ()
 
     def counts(self) -> dict[str, dict[str, int]]:
         """Per class: ``detections`` and how many of them are in each status (``named``,
@@ -290,7 +294,11 @@ class AssociationRecord:
                 f"{label}: {c['named']} of {c['detections']} detections named"
                 + (f" ({rest})" if rest else "")
             )
-        return "with the final map, " + ("; ".join(parts) or "no detections to associate")
+        text = "with the final map, " + ("; ".join(parts) or "no detections to associate")
+        if self.placed_by_matching:
+            moves = ", ".join(str(m) for m in self.placed_by_matching)
+            text += f" (movement(s) {moves}, left out of the map, placed by matching)"
+        return text
 
 
 @dataclass(frozen=True)

@@ -220,6 +220,7 @@ class Runner:
             final.reports,
             final.retracted,
             estimates,
+            final.matched,
         )
         logger.info("%s: %s", self.log.name, record.text())
         for name, why in record.retracted.items():

@@ -5,7 +5,9 @@ For each movement (its two keyframes, O1 and O2):
 1. Place the movement from the bearings of landmarks whose class is their own (the reference
    pair included) and their map estimates: chained on the end of the previous movement when
    that one was placed (one bearing at each keyframe suffices), else by resection
-   (:func:`pipeline.joint.geometry.resect`, four bearings at least).
+   (:func:`pipeline.joint.geometry.resect`, four bearings at least); when these are too few
+   after a placed movement, by matching every detection with the map
+   (:func:`pipeline.association.match.match_movement`).
 2. Per shared class, predict the bearing of each landmark already named (``red#1``, ...) from
    O1 and O2, with its std from the map covariance, the placement and the bearing noise, and
    assign the class's detections (:func:`pipeline.association.assign.assign`). Names in the
@@ -42,7 +44,8 @@ Whatever is left unresolved (contested detections, unexplained detections, a cla
 catalog count, a movement that cannot be placed, a doubtful name) is reported in the movement's
 result.
 
-6. Once the log is processed, :meth:`Associator.associate_final` associates every keyframe's
+6. Once the log is processed, :meth:`Associator.place_left_out` places the movements the map
+   left out by matching, :meth:`Associator.associate_final` associates every keyframe's
    detections again with the final map (:mod:`pipeline.association.final`), and
    :meth:`Associator.repair_final` gives a doubtful name to a landmark the detections it leaves
    unexplained point at.
@@ -74,6 +77,7 @@ from pipeline.association.hypotheses import (
     cannot_meet,
     fit,
 )
+from pipeline.association.match import Matched, match_movement, place_left_out
 from pipeline.association.predict import MAX_PRED_STD_EPS, predict_bearings, predict_ranges
 from pipeline.association.support import Outcome, Support
 from pipeline.crb import truncated_gaussian_std
@@ -258,6 +262,55 @@ class Associator:
         full = [c for c, n in self.capacity.items() if len(self.named[c]) >= n]
         return final, missing_reports(final, full, poses, self.eps_rad)
 
+    def place_left_out(
+        self,
+        unique: Mapping[tuple[int, int], Mapping[str, float]],
+        detections: Mapping[tuple[int, int], Mapping[str, Sequence[float]]],
+        poses: Mapping[tuple[int, int], KeyframePose],
+        mapped: Mapping[str, LandmarkEstimate],
+        noise_rad: float | None = None,
+    ) -> dict[tuple[int, int], KeyframePose]:
+        """Once the log is processed: the keyframes of movements the map left out (before the
+        map began, or too few of their detections identified), placed for the association
+        with the final map by matching every detection with it, from a placed neighbour
+        (:func:`pipeline.association.match.place_left_out`).
+
+        ``unique``: each keyframe's bearings of landmarks of a class of their own (rad);
+        ``detections``: its detections per shared class; ``poses`` and ``mapped``: the final
+        map; ``noise_rad``: its bearing noise std (default the one eps implies)."""
+        pts, labels = self._matching_map(mapped)
+        own = set(labels)
+        per_keyframe = {
+            key: _all_detections(unique.get(key, {}), detections.get(key, {}), own)
+            for key in set(unique) | set(detections)
+        }
+        return place_left_out(
+            per_keyframe,
+            poses,
+            pts,
+            labels,
+            self.eps_rad,
+            self.sigma_rad if noise_rad is None else noise_rad,
+        )
+
+    def _matching_map(
+        self, mapped: Mapping[str, LandmarkEstimate]
+    ) -> tuple[NDArray[np.float64], list[str]]:
+        """The map to match detections with: points (k, 2) FL and their classes (a landmark of
+        a class of its own: its name; the reference pair included)."""
+        alike = {n for names in self.named.values() for n in names}
+        pts = [np.zeros(2), np.array([1.0, 0.0])]
+        labels = list(self.reference)
+        for n, e in mapped.items():
+            if n not in alike and n not in self.reference:
+                pts.append(e.mean_fl)
+                labels.append(n)
+        for label in self.capacity:
+            for _, e in self._known(label, mapped):
+                pts.append(e.mean_fl)
+                labels.append(label)
+        return np.array(pts, np.float64).reshape(-1, 2), labels
+
     def repair_final(
         self,
         final: Sequence[FinalDetection],
@@ -337,7 +390,12 @@ class Associator:
         index: int,
         bearings: tuple[Mapping[str, float], Mapping[str, float]],
         mapped: Mapping[str, LandmarkEstimate],
+        *,
+        match: bool = False,
     ) -> tuple[MovementPose, float] | str:
+        """The movement's pose and O1's position std (FL) from identified bearings (chained on
+        the last movement, else by resection), else with ``match`` and a chained movement by
+        matching every detection with the map; else why it cannot be placed."""
         points = {self.reference[0]: np.zeros(2), self.reference[1]: np.array([1.0, 0.0])}
         points.update({n: e.mean_fl for n, e in mapped.items() if n not in self.reference})
         pts, ends, bs = [], [], []
@@ -352,24 +410,46 @@ class Associator:
         )
         n1, n2 = int((s.end == 0).sum()), int((s.end == 1).sum())
         few = f"too few bearings of mapped landmarks to place it ({n1} at O1, {n2} at O2)"
-        if n1 < 1 or n2 < 1:
-            return few
-        if self._last is not None and self._last[0] == index - 1:
-            chained = _place_chained(s, self._last[1].o2_fl, self.sigma_rad)
+        last = self._last[1] if self._last is not None and self._last[0] == index - 1 else None
+        if last is not None and n1 >= 1 and n2 >= 1:
+            chained = _place_chained(s, last.o2_fl, self.sigma_rad)
             if chained is not None:
-                pose = chained[0]
-                r = s.residuals(pose_params(pose))
+                r = s.residuals(pose_params(chained[0]))
                 if robust_std(r) <= PLACEMENT_MAX_EPS * self.eps_rad:
                     return chained
-        if n1 + n2 < 4:
-            return few
-        found = resect(s, guesses=[])
-        if found is None:
-            return "cannot be placed"
-        robust = robust_std(found.residuals_rad)
-        if robust > PLACEMENT_MAX_EPS * self.eps_rad or not math.isfinite(found.position_std_fl):
-            return f"placement does not fit the map (robust residual {_deg(robust)})"
-        return found.pose, found.position_std_fl * self.sigma_rad
+        if n1 >= 1 and n2 >= 1 and n1 + n2 >= 4:
+            found = resect(s, guesses=[])
+            if found is None:
+                why = "cannot be placed"
+            else:
+                robust = robust_std(found.residuals_rad)
+                if robust <= PLACEMENT_MAX_EPS * self.eps_rad and math.isfinite(
+                    found.position_std_fl
+                ):
+                    return found.pose, found.position_std_fl * self.sigma_rad
+                why = f"placement does not fit the map (robust residual {_deg(robust)})"
+        else:
+            why = few
+        if last is None or not match:
+            return why
+        matched = self._match(bearings, mapped, last.o2_fl)
+        if matched is None:
+            return f"{why}; its detections match the map nowhere clearly"
+        return matched.fit.pose, matched.fit.position_std_fl * self.sigma_rad
+
+    def _match(
+        self,
+        bearings: tuple[Mapping[str, float], Mapping[str, float]],
+        mapped: Mapping[str, LandmarkEstimate],
+        o1_fl: NDArray[np.float64],
+    ) -> Matched | None:
+        """The movement placed by matching every detection (identified or of a shared class)
+        with the map, from O1 where the last movement ended (:func:`match_movement`)."""
+        pts, labels = self._matching_map(mapped)
+        own = set(labels)
+        per_class = [{c: d[end].tolist() for c, d in self._dets.items()} for end in (0, 1)]
+        o1, o2 = (_all_detections(b, c, own) for b, c in zip(bearings, per_class, strict=True))
+        return match_movement(pts, labels, (o1, o2), o1_fl, 0, self.eps_rad)
 
     # ------------------------------------------------------------------ one movement
     def associate(
@@ -407,7 +487,7 @@ class Associator:
             out.names[c] = ([None] * d1.size, [None] * d2.size)
         for end in (0, 1):
             self._seen_at[index, end] = {c: d[end] for c, d in self._dets.items()}
-        placed = self._place(index, unique, mapped)
+        placed = self._place(index, unique, mapped, match=True)
         if isinstance(placed, str):
             for c, (d1, d2) in self._dets.items():
                 if d1.size + d2.size:
@@ -989,6 +1069,16 @@ def _on(ray: Ray, pose: MovementPose | None) -> Ray:
     return replace(
         ray, origin_fl=(float(o[0]), float(o[1])), direction_rad=pose.heading_rad + ray.bearing_rad
     )
+
+
+def _all_detections(
+    unique: Mapping[str, float],
+    per_class: Mapping[str, Sequence[float]],
+    known: set[str],
+) -> dict[str, Sequence[float]]:
+    """One keyframe's detections per class for matching: each identified bearing whose name is
+    in ``known`` as a class of its own, then the detections of the shared classes."""
+    return {**{n: [b] for n, b in unique.items() if n in known}, **per_class}
 
 
 def _place_chained(

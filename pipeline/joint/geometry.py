@@ -319,6 +319,29 @@ def determinacy(
     return pos, logd
 
 
+def keyframe_poses_of(
+    s: Sightings, pose: MovementPose, sigma_rad: float
+) -> tuple[KeyframePose, KeyframePose] | None:
+    """O1 and O2 of a movement fit to bearings ``s`` (bearing noise std ``sigma_rad``), each
+    with the covariance of its ``(x, y, heading)`` in its own frame; None when the bearings do
+    not determine the movement."""
+    x = pose_params(pose)
+    jac = _jacobian(s, x)
+    info = jac.T @ jac
+    if np.linalg.cond(info) > 1e14:
+        return None
+    cov = np.linalg.inv(info) * sigma_rad**2
+    c, sn, d = math.cos(pose.heading_rad), math.sin(pose.heading_rad), pose.length_fl
+    to_o1 = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])
+    to_o2 = np.array([[1.0, 0.0, -d * sn, d * c], [0.0, 1.0, d * c, d * sn], [0.0, 0.0, 1.0, 0.0]])
+    rot = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])  # FL -> the keyframe's frame
+    o1, o2 = (
+        KeyframePose(origin, pose.heading_rad, rot @ j @ cov @ j.T @ rot.T)
+        for origin, j in ((pose.o1_fl, to_o1), (pose.o2_fl, to_o2))
+    )
+    return o1, o2
+
+
 @dataclass(frozen=True)
 class RayFix:
     """A landmark placed by intersecting its rays.

@@ -24,7 +24,9 @@ detections associated again with the final map once the log is processed (``name
 ``contested``, ``unexplained``, ``not placed``, ``per_name``, a ``warning`` when every
 name of the class is given but the final map leaves several of its detections unexplained,
 and ``retracted``: names taken back then and given to the landmark those detections point at,
-whose map is then the document's ``landmarks``) and, for simulated logs, ``matched_truth``
+whose map is then the document's ``landmarks``), ``placed_by_matching`` (movements the map left
+out, placed for that association by matching their detections with the final map) and, for
+simulated logs, ``matched_truth``
 (each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
 measured against it).
 """
@@ -270,6 +272,9 @@ class SummarySink:
                 if shared_label in final:
                     final[shared_label].setdefault("retracted", {})[name] = why
             self.document["association"]["final_map"] = final
+            if self._final.placed_by_matching:
+                placed = list(self._final.placed_by_matching)
+                self.document["association"]["placed_by_matching"] = placed
         if self._doubtful:
             self.document["association"]["doubtful"] = dict(sorted(self._doubtful.items()))
         if self._unconfirmed:

@@ -131,6 +131,49 @@ def test_the_summary_names_and_reports(scored: Score) -> None:
                 assert all(pair[end] != r["bearing_deg"] for pair in then.values())
 
 
+@pytest.mark.parametrize("camera", ["unwrapped", pytest.param("omni", marks=pytest.mark.slow)])
+def test_movements_with_few_identified_bearings_are_placed_by_matching(
+    camera: str, tmp_path: Path
+) -> None:
+    # seed 231: at movements 12-15 the robot sees at most one landmark of its own at a
+    # keyframe; placed from the identified bearings alone, four movements were left out and
+    # 79 % of the detections named right with the final map (omni). Matched against the map
+    # from where movement 11 ended, every movement is placed.
+    _, s = _simulated(camera, 231, tmp_path)
+    assert [m["status"] for m in s.summary["movements"]] == ["ok"] * 20
+    final = s.summary["association"]["final_map"]["blue"]
+    assert final["not placed"] == 0
+    assert "placed_by_matching" not in s.summary["association"]
+    assert s.n_final_correct >= 0.98 * s.n_final_detections
+    assert s.n_final_correct >= 0.995 * s.n_final_named
+
+
+@pytest.mark.parametrize("camera", ["unwrapped", pytest.param("omni", marks=pytest.mark.slow)])
+def test_movements_before_the_map_began_are_placed_for_the_final_association(
+    camera: str, tmp_path: Path
+) -> None:
+    # seed 275: the reference pair is not seen from both keyframes of movements 0 and 1, so
+    # the map starts at movement 2 and they stay out of it; once the log is processed they
+    # are placed backwards from movement 2's start by matching their detections with the
+    # final map, and their detections are associated (30 of them "not placed" before)
+    log, s = _simulated(camera, 275, tmp_path)
+    assert [m["status"] for m in s.summary["movements"][:2]] != ["ok", "ok"]
+    assert s.summary["association"]["placed_by_matching"] == [0, 1]
+    final = s.summary["association"]["final_map"]["blue"]
+    assert final["not placed"] == 0
+    assert s.n_final_correct >= 0.98 * s.n_final_detections
+    assert s.n_final_correct >= 0.995 * s.n_final_named
+    # the derived log says the same
+    out = tmp_path / "derived.mcap"
+    result = CliRunner().invoke(cli, ["process", str(log), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "% with the final map, movement(s) 0, 1 placed by matching)" in result.output
+    with LogReader(out) as reader:
+        msg = next(m.decode() for m in reader.messages(["/pipeline/association"]))
+    validate("bslam.Association", msg)
+    assert msg["placed_by_matching"] == [0, 1]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("camera", ["unwrapped", "omni"])
 def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
