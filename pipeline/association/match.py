@@ -4,12 +4,13 @@ A movement is placed from bearings of identified landmarks (the reference pair, 
 class of their own, named landmarks of shared classes once association named them). When one
 of its keyframes lies where a placed movement ended or starts (the robot turns in place) but
 too few of its detections are identified to place it, :func:`match_movement` places it from
-every detection: it tries every heading that turns a detection at that keyframe onto a
-landmark of its class, and every length that turns a detection at the other keyframe onto
-one, counts the detections of both keyframes that fall within eps of a landmark of their
-class, and keeps the best pose when it clearly beats every pose that predicts the map
-differently (:data:`MATCH_LEAD` more detections). The pose is then refined by least squares
-on the detections it matched (:func:`pipeline.joint.geometry.resect`).
+every detection: it tries the headings that turn a detection at that keyframe onto a
+landmark of its class (those matching the most there), and for each every length that turns a
+detection at the other keyframe onto one, counts the detections of both keyframes that fall
+within eps of a landmark of their class, refines the best poses by least squares on the
+detections they match (:func:`pipeline.joint.geometry.resect`), and keeps the best when it
+clearly beats every pose that tells another story (:data:`MATCH_LEAD`).
+:func:`place_left_out` places, once the log is processed, the movements the map left out.
 """
 
 from __future__ import annotations
@@ -39,8 +40,10 @@ MATCH_TOL_EPS = 1.0
 MATCH_MIN = 6
 #: ... at least this many at each ...
 MATCH_MIN_PER_END = 2
-#: ... and this many more than at any pose that tells another story: one that matches
-#: MATCH_STORY detections or more with other landmarks than it does.
+#: ... and this many more than at any refined pose that tells another story: one that matches
+#: MATCH_STORY detections or more (that it matches too) with other landmarks, and lies outside
+#: its 3-std bounds (heading more than MATCH_TOL_EPS eps away, O1 or the length more than 3
+#: std away for a bearing noise of half that).
 MATCH_LEAD = 2
 MATCH_STORY = 2
 #: Headings tried (those that match the most detections at the known keyframe).
@@ -69,8 +72,7 @@ class Matched:
     sightings : Sightings
         The matched detections, each with its landmark's point.
     matched, runner_up : int
-        Detections matched at the best pose, and at the best pose that predicts the map
-        differently.
+        Detections matched at the best pose, and at the best that tells another story.
     """
 
     fit: Resection
@@ -116,8 +118,6 @@ def match_movement(
     if pts.shape[0] < 2:
         return None
     ends = _flatten(detections, lab)
-    if ends is None:
-        return None
     tol = MATCH_TOL_EPS * eps_rad
     at_a, at_o = ends[anchor_end], ends[1 - anchor_end]
     heading = _best_headings(_headings(pts, at_a, anchor), anchor, pts, at_a, tol)
@@ -238,7 +238,7 @@ _End = tuple[NDArray[np.float64], NDArray[np.bool_]]
 def _flatten(
     detections: tuple[Mapping[str, Sequence[float]], Mapping[str, Sequence[float]]],
     lab: NDArray[np.object_],
-) -> tuple[_End, _End] | None:
+) -> tuple[_End, _End]:
     """Per keyframe, the bearings (m,) of detections of a class the map holds and which
     landmarks (m, k) share each one's class."""
     out = []

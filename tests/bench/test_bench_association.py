@@ -7,9 +7,11 @@ time spent in association alone (``Associator.associate`` and ``hypothesize``), 
 association of every keyframe with the final map once the run is over; the
 yardstick (the same run with every landmark of its own class, so no association) is measured
 in the same run, alternated; and what each landmark added between consecutive sizes costs per
-movement. ``test_association_goals``: 8 identical landmarks, 10 seeds per camera model, scored
-like ``tests/replay/test_association_sim.py``; the figures are printed and kept in
-``extra_info`` (docs/RESULTS.md).
+movement. ``test_matching_cost``: placing one movement by matching its detections with the
+map, against placing it from the same detections identified. ``test_association_goals``: 8
+identical landmarks, 10 seeds per camera model, scored like
+``tests/replay/test_association_sim.py``; the figures are printed and kept in ``extra_info``
+(docs/RESULTS.md).
 """
 
 from __future__ import annotations
@@ -95,6 +97,71 @@ def test_association_scaling(benchmark: Any) -> None:
             benchmark.extra_info[f"{label} ms_per_added_landmark_{a}_{b}"] = added
             steps.append(f"{a}->{b} {added:.2f}")
         print(f"\n{label}: ms per added landmark per movement {', '.join(steps)}", end="")
+
+
+def _matching_case(
+    n: int, rng: np.random.Generator
+) -> tuple[np.ndarray, list[str], tuple[dict[str, list[float]], dict[str, list[float]]], Any]:
+    """A map of ``n`` identical landmarks and the reference pair, and one movement's
+    detections (3/4 of the landmarks at each keyframe, 1 degree of noise) with their true
+    identities as sightings (FL)."""
+    from pipeline.joint.geometry import Sightings
+
+    pts = np.vstack(([[0.0, 0.0], [1.0, 0.0]], rng.uniform((-1, -1), (2, 1), (n, 2))))
+    labels = ["L1", "L2"] + ["blue"] * n
+    o1 = rng.uniform((-0.8, -0.8), (1.8, 0.8))
+    h = rng.uniform(-math.pi, math.pi)
+    o2 = o1 + rng.uniform(0.2, 0.8) * np.array([math.cos(h), math.sin(h)])
+    dets: list[dict[str, list[float]]] = [{}, {}]
+    seen_pts, seen_end, seen_b = [], [], []
+    for end, o in enumerate((o1, o2)):
+        d = pts - o
+        b = np.arctan2(d[:, 1], d[:, 0]) - h + rng.normal(0.0, math.radians(1.0), len(pts))
+        b = np.angle(np.exp(1j * b))
+        for k in np.flatnonzero(rng.random(len(pts)) < 0.75):
+            dets[end].setdefault(labels[k], []).append(float(b[k]))
+            seen_pts.append(pts[k])
+            seen_end.append(end)
+            seen_b.append(float(b[k]))
+    s = Sightings(np.array(seen_pts), np.array(seen_end, np.int64), np.array(seen_b))
+    return pts, labels, (dets[0], dets[1]), (s, o1)
+
+
+def test_matching_cost(benchmark: Any) -> None:
+    """Placing one movement by matching its detections with the map
+    (:func:`pipeline.association.match.match_movement`, used only when too few are identified)
+    at 4, 8, 16 and 32 identical landmarks, against the yardstick of placing it from the
+    same detections identified (:func:`pipeline.joint.geometry.resect` from the known O1),
+    alternated call by call; medians and their ratio per size."""
+    from pipeline.association.match import match_movement
+    from pipeline.joint.geometry import resect
+
+    cases = {
+        n: [_matching_case(n, np.random.default_rng(100 + k)) for k in range(15)] for n in SIZES
+    }
+    matching: dict[int, list[float]] = {n: [] for n in SIZES}
+    identified: dict[int, list[float]] = {n: [] for n in SIZES}
+
+    def once() -> None:
+        for n in SIZES:
+            for pts, labels, dets, (s, o1) in cases[n]:
+                tick = time.perf_counter()
+                match_movement(pts, labels, dets, o1, 0, EPS)
+                matching[n].append(time.perf_counter() - tick)
+                tick = time.perf_counter()
+                resect(s, guesses=[], o1_known_fl=o1)
+                identified[n].append(time.perf_counter() - tick)
+
+    benchmark.pedantic(once, rounds=3, iterations=1)
+    for n in SIZES:
+        m, y = (1000.0 * float(np.median(v[n])) for v in (matching, identified))
+        print(
+            f"\n{n} landmarks: matching {m:.1f} ms per movement ({m / (n + 2):.2f} per landmark), "
+            f"{m / y:.1f} times the identified placement ({y:.2f} ms)",
+            end="",
+        )
+        benchmark.extra_info[f"matching_ms_{n}"] = m
+        benchmark.extra_info[f"matching_over_identified_{n}"] = m / y
 
 
 def test_association_goals(benchmark: Any, tmp_path: Path) -> None:
