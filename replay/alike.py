@@ -110,9 +110,9 @@ class AlikeLandmarks:
 
     def final(self, estimator: Estimator) -> FinalAssociation | None:
         """Every keyframe's detections associated with ``estimator``'s final map and what it
-        leaves open per class; when the unexplained ones point at a landmark a full catalog
-        kept out, a doubtful name is retracted and given to it
-        (:meth:`pipeline.association.Associator.repair_final`), the estimator settles
+        leaves open per class; when the unexplained ones point at a landmark, a free name of
+        its class is given to it, or with every name given a doubtful one is retracted and
+        given to it (:meth:`pipeline.association.Associator.repair_final`), the estimator settles
         (:meth:`pipeline.joint.JointSlam.settle`) and the association is made again (None:
         the estimator does not place its keyframes with their covariances)."""
         keyframe_poses = getattr(estimator, "keyframe_poses", None)
@@ -135,7 +135,7 @@ class AlikeLandmarks:
         detections, reports, poses, matched = associate()
         settle = getattr(estimator, "settle", None)
         add_history = getattr(estimator, "add_history", None)
-        if not reports or settle is None or add_history is None:
+        if settle is None or add_history is None:
             return FinalAssociation(detections, reports, matched=matched)
         last = max((m for m, _ in self.keyframe_blobs), default=-1)
         repair = self.associator.repair_final(detections, poses, estimator.estimates, last)
@@ -147,17 +147,21 @@ class AlikeLandmarks:
             add_history(name, bearings)
         settle()
         detections, reports, _, matched = associate()
-        return FinalAssociation(detections, reports, dict(repair.retracted), matched)
+        return FinalAssociation(
+            detections, reports, dict(repair.retracted), matched, dict(repair.named_at_end)
+        )
 
 
 @dataclass(frozen=True)
 class FinalAssociation:
     """What :meth:`AlikeLandmarks.final` found: every keyframe detection with the final map,
     the reports per class, the names retracted and given anew once the log was processed
-    (name -> why; the map changed only then), and the movements the map left out that were
-    placed by matching for this association."""
+    (name -> why; the map changed only then), the movements the map left out that were
+    placed by matching for this association, and the free names given then to landmarks the
+    unexplained detections point at (name -> why; the map changed then too)."""
 
     detections: list[FinalDetection]
     reports: dict[str, str]
     retracted: dict[str, str] = field(default_factory=dict)
     matched: list[int] = field(default_factory=list)
+    named_at_end: dict[str, str] = field(default_factory=dict)

@@ -140,6 +140,12 @@ def result_line(doc: dict[str, Any]) -> str:
             text += f" ({100 * share:.0f} % with the final map{also})"
         if assoc["movements_with_unresolved"]:
             text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
+        found = [n for c in final.values() for n in c.get("named_at_end", {})]
+        if found:
+            text += (
+                f"; with the final map, {', '.join(found)} named where detections no name "
+                "explained meet"
+            )
         retracted = [n for c in final.values() for n in c.get("retracted", {})]
         if retracted:
             text += (

@@ -261,10 +261,13 @@ class AssociationRecord:
         Doubtful names taken back once the log was processed and given to a landmark the
         final map's unexplained detections point at, with why.
     estimates : dict name -> EstimateRecord, or None
-        The map after that (None: the last movement's map stands).
+        The map after that or after ``named_at_end`` (None: the last movement's map stands).
     placed_by_matching : list of int
         Movements the map left out, placed for this association by matching their detections
         with the final map (:func:`pipeline.association.match.place_left_out`).
+    named_at_end : dict name -> str
+        Free names given once the log was processed to landmarks the final map's unexplained
+        detections point at, with why (``estimates`` is then the map with them).
     """
 
     timestamp_ns: int
@@ -274,6 +277,7 @@ class AssociationRecord:
     retracted: Mapping[str, str] = field(default_factory=dict)
     estimates: Mapping[str, EstimateRecord] | None = None
     placed_by_matching: Sequence[int] = ()
+    named_at_end: Mapping[str, str] = field(default_factory=dict)
 
     def counts(self) -> dict[str, dict[str, int]]:
         """Per class: ``detections`` and how many of them are in each status (``named``,

@@ -212,7 +212,8 @@ class Runner:
         final = None if self.alike is None else self.alike.final(self.slam)
         if final is None:
             return
-        estimates = _estimate_records(self.slam.estimates) if final.retracted else None
+        changed = final.retracted or final.named_at_end
+        estimates = _estimate_records(self.slam.estimates) if changed else None
         record = AssociationRecord(
             self.state.last_timestamp_ns,
             self.state.last_log_time_ns,
@@ -221,10 +222,13 @@ class Runner:
             final.retracted,
             estimates,
             final.matched,
+            final.named_at_end,
         )
         logger.info("%s: %s", self.log.name, record.text())
         for name, why in record.retracted.items():
             logger.warning("%s: with the final map, %s %s", self.log.name, name, why)
+        for name, why in record.named_at_end.items():
+            logger.info("%s: with the final map, %s %s", self.log.name, name, why)
         for label, text in record.reports.items():
             logger.warning("%s: %s with the final map: %s", self.log.name, label, text)
         for sink in self.sinks:

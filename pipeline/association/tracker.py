@@ -124,6 +124,14 @@ RIVAL_LEAD = 2
 RIVAL_RMS_RATIO = 2.0
 
 
+#: Once the log is processed, a point the unexplained detections meet at is a named landmark
+#: seen again only when also this close to it (squared Mahalanobis distance with both
+#: covariances; chi-square, 2 dof, 99.9 %): from many keyframes a landmark lines up with a named
+#: one a few degrees away, whose gate then holds most of its rays, though the final map told them
+#: apart.
+FINAL_APART_CHI2 = 13.82
+
+
 def slot_name(label: str, k: int) -> str:
     """The name of the ``k``-th confirmed landmark of class ``label`` (``red#1``)."""
     return f"{label}#{k}"
@@ -167,6 +175,10 @@ class MovementAssociation:
         Doubtful names taken back with this movement and given to a landmark a full catalog
         kept out (in ``confirmed`` too; the estimator must forget the old landmark before it
         takes ``history``); also in ``unresolved`` (key ``"<name> retracted"``).
+    named_at_end : dict name -> str
+        Once the log is processed (:meth:`Associator.repair_final`): free names given to
+        landmarks the final map's unexplained detections point at (in ``confirmed`` too),
+        with why.
     n_hypotheses : int
         Live hypotheses after this movement.
     pose : MovementPose or None
@@ -185,6 +197,7 @@ class MovementAssociation:
     doubtful: dict[str, str] = field(default_factory=dict)
     unconfirmed: dict[str, str] = field(default_factory=dict)
     retracted: dict[str, str] = field(default_factory=dict)
+    named_at_end: dict[str, str] = field(default_factory=dict)
     n_hypotheses: int = 0
     pose: MovementPose | None = None
 
@@ -318,21 +331,23 @@ class Associator:
         mapped: Mapping[str, LandmarkEstimate],
         index: int,
     ) -> MovementAssociation | None:
-        """Once the log is processed: per class whose names are all given, when the final
-        map leaves detections unexplained whose rays meet at one point as a search names a
-        landmark (:data:`DISCOVER_KEYFRAMES` keyframes, :data:`DISCOVER_LINES` lines of
-        sight, every ray within eps, not mostly a named landmark's), a doubtful name is
-        retracted and given to that point (as :meth:`hypothesize` does with a full catalog):
-        the one the final association gave a detection at the smallest share of the keyframes
-        where the final map predicts it (:meth:`_final_share`).
+        """Once the log is processed, per class, where the detections the final map leaves
+        unexplained meet at one point as a search names a landmark (:meth:`_final_point`):
+        with names of the class still free, the point gets the next one (and the rest of the
+        rays are searched again while names are free: ``named_at_end``); with every name given
+        and one doubtful, a doubtful name is retracted and given to the point (as
+        :meth:`hypothesize` does with a full catalog): the one the final association gave a
+        detection at the smallest share of the keyframes where the final map predicts it
+        (:meth:`_final_share`).
 
         ``final`` is :meth:`associate_final`'s association, ``poses`` and ``mapped`` the final
-        map, ``index`` the last movement. Returns what changed (``retracted``, ``confirmed``,
-        ``history``: the estimator forgets the retracted landmarks, takes the history and
-        settles), or None when nothing did."""
+        map, ``index`` the last movement. Returns what changed (``retracted``,
+        ``named_at_end``, ``confirmed``, ``history``: the estimator forgets the retracted
+        landmarks, takes the history and settles), or None when nothing did."""
         out = MovementAssociation(index + 1)  # after the last movement: no ray is its own
         for label, count in self.capacity.items():
-            if len(self.named[label]) < count or self._most_doubtful(label) is None:
+            full = len(self.named[label]) >= count
+            if full and self._most_doubtful(label) is None:
                 continue
             left = [d for d in final if d.label == label and d.status == "unexplained"]
             rays = [
@@ -340,24 +355,52 @@ class Associator:
                 for j, d in enumerate(left)
                 if (p := poses.get((d.movement, d.end))) is not None
             ]
-            met = meeting_point(rays, self.eps_rad)
-            if met is None or len(met[1]) < DISCOVER_KEYFRAMES:
-                continue
-            h = fit(label, met[1], self.eps_rad, self.sigma_rad, met[0])
-            if h is None or (lines := h.lines_of_sight(self._distinct)) < DISCOVER_LINES:
-                continue
-            if any(
-                2 * sum(self._ray_fits(r, e) for r in h.rays) > len(h.rays)
-                for _, e in self._known(label, mapped)
-            ):
-                continue  # mostly bearings of a named landmark: that one, left unexplained
-            out.names[label] = ([], [])
-            weakest = min(
-                (n for n in self.named[label] if self.support[n].doubt() is not None),
-                key=lambda n: self._final_share(n, final, poses, mapped),
-            )
-            self._give_name(label, h, lines, out, searched=True, retract=weakest)
+            while (found := self._final_point(label, rays, mapped)) is not None:
+                h, lines = found
+                out.names.setdefault(label, ([], []))
+                if full:
+                    weakest = min(
+                        (n for n in self.named[label] if self.support[n].doubt() is not None),
+                        key=lambda n: self._final_share(n, final, poses, mapped),
+                    )
+                    self._give_name(label, h, lines, out, searched=True, retract=weakest)
+                    break
+                self._give_name(label, h, lines, out, searched=True)
+                x, y = h.point_fl
+                out.named_at_end[out.confirmed[-1]] = (
+                    f"named once the log was processed: {len(h.rays)} detections the final map "
+                    f"left unexplained, from {len({(r.movement, r.end) for r in h.rays})} "
+                    f"keyframes along {lines} lines of sight, meet at ({x:.2f}, {y:.2f}) FL"
+                )
+                if len(self.named[label]) >= count:
+                    break
+                rays = [r for r in rays if (r.movement, r.end, r.detection) not in h.keys]
         return out if out.confirmed else None
+
+    def _final_point(
+        self, label: str, rays: Sequence[Ray], mapped: Mapping[str, LandmarkEstimate]
+    ) -> tuple[Hypothesis, int] | None:
+        """Where ``rays`` (unexplained by the final map) meet as the search names a landmark:
+        :data:`DISCOVER_KEYFRAMES` keyframes, :data:`DISCOVER_LINES` lines of sight over
+        :data:`DISCOVER_MOVEMENTS` movements, every ray within eps, not a named landmark seen
+        again (mostly its rays and within :data:`FINAL_APART_CHI2` of it); the fitted point and
+        its lines of sight, or None."""
+        met = meeting_point(rays, self.eps_rad)
+        if met is None or len(met[1]) < DISCOVER_KEYFRAMES:
+            return None
+        h = fit(label, met[1], self.eps_rad, self.sigma_rad, met[0])
+        if h is None or (lines := h.lines_of_sight(self._distinct)) < DISCOVER_LINES:
+            return None
+        if len({r.movement for r in h.rays}) < DISCOVER_MOVEMENTS:
+            return None
+        for _, e in self._known(label, mapped):
+            d = h.point_fl - e.mean_fl
+            apart = float(d @ np.linalg.solve(h.cov_fl + e.cov_fl, d))
+            if apart <= FINAL_APART_CHI2 and 2 * sum(self._ray_fits(r, e) for r in h.rays) > len(
+                h.rays
+            ):
+                return None  # mostly bearings of a named landmark: that one, left unexplained
+        return h, lines
 
     def _final_share(
         self,

@@ -218,6 +218,8 @@ class DerivedLogSink:
             msg["retracted"] = [{"name": n, "text": t} for n, t in record.retracted.items()]
         if record.estimates is not None:
             msg["landmarks"] = _landmark_rows(record.estimates)
+        if record.named_at_end:
+            msg["named_at_end"] = [{"name": n, "text": t} for n, t in record.named_at_end.items()]
         if record.placed_by_matching:
             msg["placed_by_matching"] = list(record.placed_by_matching)
         self._write(record.log_time_ns, "/pipeline/association", msg)

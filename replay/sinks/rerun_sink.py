@@ -328,6 +328,8 @@ class RerunSink:
             self.rec.log("log", rr.TextLog(f"with the final map, {name} {why}", level="WARN"))
             self._doubtful.pop(name, None)
             self._unconfirmed.pop(name, None)
+        for name, why in record.named_at_end.items():
+            self.rec.log("log", rr.TextLog(f"with the final map, {name} {why}", level="INFO"))
         if record.estimates is not None and self._run is not None:
             names = [n for n in record.estimates if n not in self._run.session.reference]
             self._log_map(record.estimates, names)

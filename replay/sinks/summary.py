@@ -23,8 +23,9 @@ widely), those still ``unconfirmed`` (name -> why), per class ``final_map``: the
 detections associated again with the final map once the log is processed (``named``,
 ``contested``, ``unexplained``, ``not placed``, ``per_name``, a ``warning`` when every
 name of the class is given but the final map leaves several of its detections unexplained,
-and ``retracted``: names taken back then and given to the landmark those detections point at,
-whose map is then the document's ``landmarks``), ``placed_by_matching`` (movements the map left
+``retracted``: names taken back then and given to the landmark those detections point at,
+and ``named_at_end``: free names given then to landmarks unexplained detections point at; the
+map after either is the document's ``landmarks``), ``placed_by_matching`` (movements the map left
 out, placed for that association by matching their detections with the final map) and, for
 simulated logs, ``matched_truth``
 (each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
@@ -267,10 +268,14 @@ class SummarySink:
                     per_name[d.name] = per_name.get(d.name, 0) + 1
             for label, text in self._final.reports.items():
                 final[label]["warning"] = text
-            for name, why in self._final.retracted.items():
-                shared_label = class_of_name(name)
-                if shared_label in final:
-                    final[shared_label].setdefault("retracted", {})[name] = why
+            for key, given in (
+                ("retracted", self._final.retracted),
+                ("named_at_end", self._final.named_at_end),
+            ):
+                for name, why in given.items():
+                    shared_label = class_of_name(name)
+                    if shared_label in final:
+                        final[shared_label].setdefault(key, {})[name] = why
             self.document["association"]["final_map"] = final
             if self._final.placed_by_matching:
                 placed = list(self._final.placed_by_matching)

@@ -105,7 +105,7 @@ class TerminalView:
 
     def association(self, record: AssociationRecord) -> None:
         text = f"{self._header}{record.text()}"
-        for name, why in record.retracted.items():
+        for name, why in {**record.retracted, **record.named_at_end}.items():
             text += f"; {name} {why}"
         for label, why in record.reports.items():
             text += f"; {label}: {why}"

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from pipeline.association import Associator
 from pipeline.association.final import (
     MISSING_UNEXPLAINED,
     FinalDetection,
@@ -17,6 +18,7 @@ from pipeline.association.final import (
 )
 from pipeline.association.hypotheses import Ray
 from pipeline.association.predict import predict_bearings
+from pipeline.association.support import Support
 from pipeline.estimate import LandmarkEstimate
 from pipeline.joint.geometry import KeyframePose
 
@@ -209,3 +211,73 @@ def test_the_rays_of_a_missing_landmark_are_found_among_strays() -> None:
         Ray.placed(1, 0, 0, 0.3, np.array([0.0, 0.1]), 0.0),
     ]
     assert meeting_point(parallel, 3 * DEG) is None
+
+
+def _unexplained_from(
+    point: np.ndarray, origins: np.ndarray, rng: np.random.Generator
+) -> tuple[list[FinalDetection], dict[tuple[int, int], KeyframePose]]:
+    """Keyframes at ``origins`` (two per movement) and, at each, one detection of ``point``
+    (1 degree of noise) that the final map left unexplained."""
+    final, poses = [], {}
+    for k, origin in enumerate(origins):
+        heading = float(rng.uniform(-math.pi, math.pi))
+        key = (k // 2, k % 2)
+        poses[key] = KeyframePose(origin, heading, np.diag([1e-6, 1e-6, 1e-6]))
+        d = point - origin
+        b = math.atan2(d[1], d[0]) - heading + rng.normal(0.0, DEG)
+        final.append(FinalDetection(key[0], key[1], "blue", float(b), None, "unexplained"))
+    return final, poses
+
+
+def _one_named(n_catalog: int) -> tuple[Associator, dict[str, LandmarkEstimate]]:
+    """An associator whose class ``blue`` has ``blue#1`` named, at (0, 0.5) FL."""
+    assoc = Associator({"blue": n_catalog}, ("L1", "L2"), vision_error_rad=3.0 * DEG)
+    assoc.named["blue"] = ["blue#1"]
+    assoc.support["blue#1"] = Support(0)
+    return assoc, {"blue#1": LandmarkEstimate(np.array([0.0, 0.5]), 1e-4 * np.eye(2))}
+
+
+def test_a_free_name_goes_to_where_the_unexplained_detections_meet() -> None:
+    rng = np.random.default_rng(3)
+    # a landmark 17.5 cm (0.35 FL) beyond blue#1, seen mostly from a fan of keyframes behind it
+    # where the two line up within a few degrees (within blue#1's gate), and from 4 keyframes
+    # to the side: the final map told their detections apart
+    missing = np.array([0.35, 0.5])
+    fan = np.column_stack((rng.uniform(1.6, 2.4, 12), 0.5 + rng.uniform(-0.35, 0.35, 12)))
+    side = np.array([[0.2, -0.6], [0.5, -0.7], [0.8, -0.6], [1.0, -0.5]])
+    origins = np.vstack((fan, side))
+    assoc, mapped = _one_named(2)
+    final, poses = _unexplained_from(missing, origins, rng)
+    in_gate = [
+        abs(
+            math.remainder(
+                d.bearing_rad
+                + poses[d.movement, d.end].heading_rad
+                - math.atan2(
+                    0.5 - poses[d.movement, d.end].origin_fl[1],
+                    -poses[d.movement, d.end].origin_fl[0],
+                ),
+                math.tau,
+            )
+        )
+        < 4.0 * DEG
+        for d in final
+    ]
+    assert sum(in_gate) > len(final) / 2  # the scenario: mostly within blue#1's gate
+    out = assoc.repair_final(final, poses, mapped, 7)
+    assert out is not None
+    assert list(out.named_at_end) == ["blue#2"] == out.confirmed
+    rays = len(out.history["blue#2"])
+    assert rays >= 14
+    assert f"{rays} detections" in out.named_at_end["blue#2"]
+    assert np.linalg.norm(assoc.unmapped["blue#2"].point_fl - missing) < 0.02
+    # blue#1's own detections, left unexplained (its point 1 cm off): not a second landmark
+    assoc, mapped = _one_named(2)
+    final, poses = _unexplained_from(mapped["blue#1"].mean_fl + 0.007, origins, rng)
+    assert assoc.repair_final(final, poses, mapped, 7) is None
+    # too few keyframes: not named; the class full and no name doubtful: nothing retracted
+    final, poses = _unexplained_from(missing, origins[:6], rng)
+    assert assoc.repair_final(final, poses, mapped, 7) is None
+    assoc, mapped = _one_named(1)
+    final, poses = _unexplained_from(missing, origins, rng)
+    assert assoc.repair_final(final, poses, mapped, 7) is None

@@ -174,6 +174,39 @@ def test_movements_before_the_map_began_are_placed_for_the_final_association(
     assert msg["placed_by_matching"] == [0, 1]
 
 
+@pytest.mark.parametrize("camera", ["unwrapped", pytest.param("omni", marks=pytest.mark.slow)])
+def test_a_landmark_never_named_during_the_run_is_named_at_the_end(
+    camera: str, tmp_path: Path
+) -> None:
+    # seed 168: one landmark stands where, from most of the robot's keyframes, it lines up with
+    # a named one a few degrees away; the run ends with 7 names. With the final map its
+    # detections are told apart and left unexplained, their rays meet at it, and the free name
+    # goes to it.
+    log, s = _simulated(camera, 168, tmp_path)
+    last = s.summary["movements"][-1]["landmarks"]
+    assert sum(n.startswith("blue#") for n in last) == 7
+    final = s.summary["association"]["final_map"]["blue"]
+    (name,) = final["named_at_end"]
+    assert name == "blue#8"
+    assert "named once the log was processed" in final["named_at_end"][name]
+    assert s.n_named == s.n_true == 8
+    assert len(set(s.matched.values())) == 8
+    assert max(s.errors_m.values()) <= 0.10
+    assert sum(s.errors_m.values()) / 8 <= 0.03
+    assert s.n_final_correct >= 0.98 * s.n_final_detections
+    out = tmp_path / "derived.mcap"
+    result = CliRunner().invoke(cli, ["process", str(log), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "with the final map, blue#8 named where detections no name explained meet" in (
+        result.output
+    )
+    with LogReader(out) as reader:
+        msg = next(m.decode() for m in reader.messages(["/pipeline/association"]))
+    validate("bslam.Association", msg)
+    assert [r["name"] for r in msg["named_at_end"]] == ["blue#8"]
+    assert "blue#8" in {r["name"] for r in msg["landmarks"]}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("camera", ["unwrapped", "omni"])
 def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
