@@ -25,6 +25,10 @@ from pipeline.slam import MovementObservation, MovementResult
 
 #: Keyframe poses of the final map, (movement, end) -> pose.
 Poses = dict[tuple[int, int], KeyframePose]
+#: Once the log is processed, the map is repaired (a free name given, a doubtful one retracted
+#: and given) and associated again at most this many times: a name given frees the detections
+#: it explains, and those left may then point at another landmark.
+REPAIR_ROUNDS = 3
 
 
 class AlikeLandmarks:
@@ -113,8 +117,9 @@ class AlikeLandmarks:
         leaves open per class; when the unexplained ones point at a landmark, a free name of
         its class is given to it, or with every name given a doubtful one is retracted and
         given to it (:meth:`pipeline.association.Associator.repair_final`), the estimator settles
-        (:meth:`pipeline.joint.JointSlam.settle`) and the association is made again (None:
-        the estimator does not place its keyframes with their covariances)."""
+        (:meth:`pipeline.joint.JointSlam.settle`) and the association is made again, up to
+        :data:`REPAIR_ROUNDS` times (None: the estimator does not place its keyframes with
+        their covariances)."""
         keyframe_poses = getattr(estimator, "keyframe_poses", None)
         if keyframe_poses is None:
             return None
@@ -138,18 +143,21 @@ class AlikeLandmarks:
         if settle is None or add_history is None:
             return FinalAssociation(detections, reports, matched=matched)
         last = max((m for m, _ in self.keyframe_blobs), default=-1)
-        repair = self.associator.repair_final(detections, poses, estimator.estimates, last)
-        if repair is None:
-            return FinalAssociation(detections, reports, matched=matched)
-        for name in repair.retracted:
-            estimator.forget(name)
-        for name, bearings in repair.history.items():
-            add_history(name, bearings)
-        settle()
-        detections, reports, _, matched = associate()
-        return FinalAssociation(
-            detections, reports, dict(repair.retracted), matched, dict(repair.named_at_end)
-        )
+        retracted: dict[str, str] = {}
+        named_at_end: dict[str, str] = {}
+        for _ in range(REPAIR_ROUNDS):
+            repair = self.associator.repair_final(detections, poses, estimator.estimates, last)
+            if repair is None:
+                break
+            for name in repair.retracted:
+                estimator.forget(name)
+            for name, bearings in repair.history.items():
+                add_history(name, bearings)
+            settle()
+            retracted.update(repair.retracted)
+            named_at_end.update(repair.named_at_end)
+            detections, reports, poses, matched = associate()
+        return FinalAssociation(detections, reports, retracted, matched, named_at_end)
 
 
 @dataclass(frozen=True)
