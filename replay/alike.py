@@ -128,20 +128,20 @@ class AlikeLandmarks:
             poses: Poses = keyframe_poses()
             noise = getattr(estimator, "noise", None)
             sigma = None if noise is None else noise.sigma_rad
-            matched = self.associator.place_left_out(
+            left_out = self.associator.place_left_out(
                 self.keyframe_unique, self.keyframe_blobs, poses, estimator.estimates, sigma
             )
-            poses.update(matched)
+            poses.update(left_out)
             found, reports = self.associator.associate_final(
                 self.keyframe_blobs, poses, estimator.estimates, sigma
             )
-            return found, reports, poses, sorted({m for m, _ in matched})
+            return found, reports, poses, sorted({m for m, _ in left_out})
 
-        detections, reports, poses, matched = associate()
+        detections, reports, poses, placed = associate()
         settle = getattr(estimator, "settle", None)
         add_history = getattr(estimator, "add_history", None)
         if settle is None or add_history is None:
-            return FinalAssociation(detections, reports, matched=matched)
+            return FinalAssociation(detections, reports, placed_by_matching=placed)
         last = max((m for m, _ in self.keyframe_blobs), default=-1)
         retracted: dict[str, str] = {}
         named_at_end: dict[str, str] = {}
@@ -156,8 +156,8 @@ class AlikeLandmarks:
             settle()
             retracted.update(repair.retracted)
             named_at_end.update(repair.named_at_end)
-            detections, reports, poses, matched = associate()
-        return FinalAssociation(detections, reports, retracted, matched, named_at_end)
+            detections, reports, poses, placed = associate()
+        return FinalAssociation(detections, reports, retracted, placed, named_at_end)
 
 
 @dataclass(frozen=True)
@@ -171,5 +171,5 @@ class FinalAssociation:
     detections: list[FinalDetection]
     reports: dict[str, str]
     retracted: dict[str, str] = field(default_factory=dict)
-    matched: list[int] = field(default_factory=list)
+    placed_by_matching: list[int] = field(default_factory=list)
     named_at_end: dict[str, str] = field(default_factory=dict)

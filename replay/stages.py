@@ -221,7 +221,7 @@ class Runner:
             final.reports,
             final.retracted,
             estimates,
-            final.matched,
+            final.placed_by_matching,
             final.named_at_end,
         )
         logger.info("%s: %s", self.log.name, record.text())
