@@ -328,7 +328,7 @@ def keyframe_poses_of(
     x = pose_params(pose)
     jac = _jacobian(s, x)
     info = jac.T @ jac
-    if np.linalg.cond(info) > 1e14:
+    if not np.all(np.isfinite(info)) or np.linalg.cond(info) > 1e14:
         return None
     cov = np.linalg.inv(info) * sigma_rad**2
     c, sn, d = math.cos(pose.heading_rad), math.sin(pose.heading_rad), pose.length_fl

@@ -170,3 +170,21 @@ def test_movements_left_out_are_placed_outward_from_the_placed_ones() -> None:
         assert abs(wrap_rad(kf.heading_rad - headings[m])) < 1.0 * DEG
     # nothing to start from: nothing placed
     assert place_left_out(detections, {}, pts, labels, EPS, SIGMA) == {}
+
+
+def test_degenerate_input_is_refused_without_an_error() -> None:
+    o1 = np.array([0.5, -0.5])
+    one_point = np.zeros((3, 2))  # every landmark at one point: no extent, no length
+    dets = ({"blue": [0.1, 0.2, 0.3]}, {"blue": [0.4, 0.5, 0.6]})
+    assert match_movement(one_point, ["blue"] * 3, dets, o1, 0, EPS) is None
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 1.0], [1.5, -0.8]])
+    nan = ({"blue": [math.nan, 0.2], "L1": [math.nan]}, {"blue": [math.nan]})
+    assert match_movement(pts, ["L1", "blue", "blue", "blue"], nan, o1, 1, EPS) is None
+    assert match_movement(pts[:1], ["blue"], dets, o1, 0, EPS) is None  # one landmark
+    # the known keyframe on a landmark: that landmark's bearing is undefined; no error
+    rng = np.random.default_rng(6)
+    on = ({"blue": list(rng.uniform(-3, 3, 4))}, {"blue": list(rng.uniform(-3, 3, 4))})
+    found = match_movement(pts, ["blue"] * 4, on, pts[2], 0, EPS)
+    assert found is None or np.all(np.isfinite(found.fit.pose.o1_fl))
+    flat = Sightings(np.zeros((3, 2)), np.array([0, 1, 1]), np.zeros(3))
+    assert keyframe_poses_of(flat, MovementPose(np.zeros(2), 0.0, 1.0), SIGMA) is None
