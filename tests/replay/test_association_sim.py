@@ -50,6 +50,18 @@ def _retracted_at_end(s: Score) -> dict[str, str]:
     return dict(s.summary["association"]["final_map"]["blue"].get("retracted", {}))
 
 
+def _processed(log: Path, folder: Path) -> tuple[str, dict[str, Any]]:
+    """``bslam process LOG --out``: its output, and the derived log's association message
+    (checked against its schema)."""
+    out = folder / "derived.mcap"
+    result = CliRunner().invoke(cli, ["process", str(log), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    with LogReader(out) as reader:
+        msg: dict[str, Any] = next(m.decode() for m in reader.messages(["/pipeline/association"]))
+    validate("bslam.Association", msg)
+    return result.output, msg
+
+
 def _replayed(log: Path, folder: Path) -> tuple[list[str], dict[str, list[dict[str, Any]]]]:
     """``bslam replay`` of ``log`` read back with Rerun's reader: the map's last labels, and
     the rows per entity."""
@@ -164,13 +176,8 @@ def test_movements_before_the_map_began_are_placed_for_the_final_association(
     assert s.n_final_correct >= 0.98 * s.n_final_detections
     assert s.n_final_correct >= 0.995 * s.n_final_named
     # the derived log says the same
-    out = tmp_path / "derived.mcap"
-    result = CliRunner().invoke(cli, ["process", str(log), "--out", str(out)])
-    assert result.exit_code == 0, result.output
-    assert "% with the final map, movement(s) 0, 1 placed by matching)" in result.output
-    with LogReader(out) as reader:
-        msg = next(m.decode() for m in reader.messages(["/pipeline/association"]))
-    validate("bslam.Association", msg)
+    output, msg = _processed(log, tmp_path)
+    assert "% with the final map, movement(s) 0, 1 placed by matching)" in output
     assert msg["placed_by_matching"] == [0, 1]
 
 
@@ -194,15 +201,8 @@ def test_a_landmark_never_named_during_the_run_is_named_at_the_end(
     assert max(s.errors_m.values()) <= 0.10
     assert sum(s.errors_m.values()) / 8 <= 0.03
     assert s.n_final_correct >= 0.98 * s.n_final_detections
-    out = tmp_path / "derived.mcap"
-    result = CliRunner().invoke(cli, ["process", str(log), "--out", str(out)])
-    assert result.exit_code == 0, result.output
-    assert "with the final map, blue#8 named where detections no name explained meet" in (
-        result.output
-    )
-    with LogReader(out) as reader:
-        msg = next(m.decode() for m in reader.messages(["/pipeline/association"]))
-    validate("bslam.Association", msg)
+    output, msg = _processed(log, tmp_path)
+    assert "with the final map, blue#8 named where detections no name explained meet" in output
     assert [r["name"] for r in msg["named_at_end"]] == ["blue#8"]
     assert "blue#8" in {r["name"] for r in msg["landmarks"]}
 
@@ -423,13 +423,8 @@ def test_a_name_off_its_landmark_is_retracted_once_the_log_is_processed(tmp_path
     assert set(_retracted_at_end(s)) == off
     assert s.n_named == 8 and max(s.errors_m.values()) <= 0.10
     assert "doubtful" not in s.summary["association"]
-    out = tmp_path / "derived.mcap"
-    result = CliRunner().invoke(cli, ["process", str(log), "--out", str(out)])
-    assert result.exit_code == 0, result.output
-    assert "with the final map, blue#6 given to the landmark" in result.output
-    with LogReader(out) as reader:
-        msg = next(m.decode() for m in reader.messages(["/pipeline/association"]))
-    validate("bslam.Association", msg)
+    output, msg = _processed(log, tmp_path)
+    assert "with the final map, blue#6 given to the landmark" in output
     assert [r["name"] for r in msg["retracted"]] == ["blue#6"]
     final = {r["name"]: r["mean"] for r in msg["landmarks"]}
     assert final.keys() == s.summary["landmarks"].keys()
@@ -449,12 +444,7 @@ def test_detections_a_name_off_its_landmark_leaves_behind_are_warned_about(
     assert final["unexplained"] >= MISSING_UNEXPLAINED
     assert "a landmark may be missing from the map" in final["warning"]
     assert "keyframes meet near" in final["warning"]
-    out = tmp_path / "derived.mcap"
-    result = CliRunner().invoke(cli, ["process", str(log), "--out", str(out)])
-    assert result.exit_code == 0, result.output
-    assert "with the final map, blue: detections no name explains" in result.output
-    assert f"blue with the final map: {final['warning']}" in result.output  # a warning line
-    with LogReader(out) as reader:
-        msg = next(m.decode() for m in reader.messages(["/pipeline/association"]))
-    validate("bslam.Association", msg)
+    output, msg = _processed(log, tmp_path)
+    assert "with the final map, blue: detections no name explains" in output
+    assert f"blue with the final map: {final['warning']}" in output  # a warning line
     assert msg["warnings"] == [{"class": "blue", "text": final["warning"]}]
