@@ -210,6 +210,8 @@ def _refine(
     fit = None
     for _ in range(2):
         s = _sightings(pts, at, pairs, anchor_end)
+        # O1 as the search's start (the known keyframe, or where the guess puts O1): a seed,
+        # refined with the rest; how well the matches pin O1 is measured below
         fit = resect(s, guesses=[guess], o1_known_fl=guess.o1_fl)
         if fit is None or not np.isfinite(fit.position_std_fl):
             return None
