@@ -128,7 +128,7 @@ def result_line(doc: dict[str, Any]) -> str:
             text += f", {100 * sum(c['named'] for c in counts) / seen:.0f} % of {seen} detections"
         final = assoc.get("final_map", {})
         if sum(c["detections"] for c in final.values()):
-            share = sum(c["named"] for c in final.values()) / sum(
+            share = sum(c["named"] + c["in line"] for c in final.values()) / sum(
                 c["detections"] for c in final.values()
             )
             matched = assoc.get("placed_by_matching", [])

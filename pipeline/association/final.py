@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
-from pipeline.association.assign import assign
+from pipeline.association.assign import GATE_CHI2, assign
 from pipeline.association.hypotheses import FIT_TOL_EPS, MIN_PARALLAX_EPS, Ray, RaySet
 from pipeline.association.predict import MAX_PRED_STD_EPS, predict_bearings, predict_ranges
 from pipeline.estimate import LandmarkEstimate
@@ -52,10 +52,12 @@ MISSING_UNEXPLAINED = 3
 #: ... and where their rays meet is said when rays of this many keyframes pass within eps of it.
 MISSING_KEYFRAMES = 4
 
-#: What became of one detection: given a name, contested by several named landmarks, explained
-#: by none, or at a keyframe the map does not hold.
-Status = Literal["named", "contested", "unexplained", "not placed"]
-STATUSES: tuple[Status, ...] = ("named", "contested", "unexplained", "not placed")
+#: What became of one detection: given a name; one blob where several named landmarks line up
+#: (predicted within eps of each other, none clearly in front, no other blob near: it is one
+#: or several of them); contested by several named landmarks; explained by none; or at a
+#: keyframe the map does not hold.
+Status = Literal["named", "in line", "contested", "unexplained", "not placed"]
+STATUSES: tuple[Status, ...] = ("named", "in line", "contested", "unexplained", "not placed")
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,8 @@ class FinalDetection:
         The landmark it is (``red#2``), None when not named.
     status : str
         One of :data:`STATUSES`.
+    in_line : tuple of str
+        With status ``in line``, the landmarks that line up on its blob (else empty).
     """
 
     movement: int
@@ -82,6 +86,7 @@ class FinalDetection:
     bearing_rad: float
     name: str | None
     status: Status
+    in_line: tuple[str, ...] = ()
 
 
 def associate_final(
@@ -121,15 +126,18 @@ def associate_final(
             names = [name for name, _ in known.get(label, ())]
             status: list[Status] = ["not placed" if pose is None else "unexplained"] * det.size
             given: list[str | None] = [None] * det.size
+            lined: list[tuple[str, ...]] = [()] * det.size
             if pose is not None and names and det.size:
-                pairs, contested = _assign(pose, det, known[label], noise_rad, eps_rad)
+                pairs, contested, in_line = _assign(pose, det, known[label], noise_rad, eps_rad)
                 for i, j in pairs:
                     given[j], status[j] = names[i], "named"
                 for j in contested:
                     status[j] = "contested"
+                for j, lms in in_line.items():
+                    status[j], lined[j] = "in line", tuple(names[i] for i in lms)
             out.extend(
-                FinalDetection(movement, end, label, float(b), n, s)
-                for b, n, s in zip(det, given, status, strict=True)
+                FinalDetection(movement, end, label, float(b), n, s, o)
+                for b, n, s, o in zip(det, given, status, lined, strict=True)
             )
     return out
 
@@ -140,8 +148,11 @@ def _assign(
     known: Sequence[tuple[str, LandmarkEstimate]],
     noise_rad: float,
     eps_rad: float,
-) -> tuple[list[tuple[int, int]], list[int]]:
-    """Pairs (index in ``known``, detection) and contested detections at one keyframe."""
+) -> tuple[list[tuple[int, int]], list[int], dict[int, list[int]]]:
+    """At one keyframe: pairs (index in ``known``, detection), contested detections, and
+    detections that are one blob where landmarks line up (detection -> indices in ``known``:
+    contested by them, they unpaired, predicted within eps of each other, no other detection
+    within eps)."""
     pts = np.array([e.mean_fl for _, e in known]).reshape(-1, 2)
     covs = np.array([e.cov_fl for _, e in known]).reshape(-1, 2, 2)
     pred, std = predict_bearings(
@@ -166,7 +177,18 @@ def _assign(
         range_std_fl=range_std_fl,
         in_line_rad=eps_rad,
     )
-    return [(int(sharp[i]), j) for i, j in a.pairs], sorted(a.contested_detections)
+    free = np.setdiff1d(sharp, [sharp[i] for i, _ in a.pairs])
+    in_line: dict[int, list[int]] = {}
+    for j in a.contested_detections:
+        off = wrap_rad(det_rad[j] - pred[free])
+        gated = free[off**2 <= GATE_CHI2 * std[free] ** 2]
+        lone = int((np.abs(wrap_rad(det_rad - det_rad[j])) <= eps_rad).sum()) == 1
+        p = pred[gated]
+        together = bool(np.all(np.abs(wrap_rad(p[:, None] - p[None, :])) <= eps_rad))
+        if gated.size >= 2 and lone and together:
+            in_line[j] = [int(i) for i in gated]
+    contested = [j for j in a.contested_detections if j not in in_line]
+    return [(int(sharp[i]), j) for i, j in a.pairs], sorted(contested), in_line
 
 
 def missing_reports(

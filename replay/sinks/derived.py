@@ -210,6 +210,8 @@ class DerivedLogSink:
             }
             if d.name is not None:
                 row["name"] = d.name
+            if d.in_line:
+                row["in_line"] = list(d.in_line)
             rows.append(row)
         msg: dict[str, Any] = {"timestamp": stamp_from_ns(record.timestamp_ns), "detections": rows}
         if record.reports:

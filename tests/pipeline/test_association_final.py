@@ -281,3 +281,37 @@ def test_a_free_name_goes_to_where_the_unexplained_detections_meet() -> None:
     assoc, mapped = _one_named(1)
     final, poses = _unexplained_from(missing, origins, rng)
     assert assoc.repair_final(final, poses, mapped, 7) is None
+
+
+def test_one_blob_where_landmarks_line_up_is_said_to_be_theirs() -> None:
+    # two landmarks 2 m away, 1.5 degrees apart at about the same distance: one blob between
+    # them could be either or both; none is clearly in front to take it
+    pts = 2.0 * np.array([[math.cos(a), math.sin(a)] for a in (0.0, 1.5 * DEG)])
+    pose = KeyframePose(np.zeros(2), 0.0, np.diag([1e-6, 1e-6, (0.3 * DEG) ** 2]))
+    known = _known(pts, 0.005)
+    one = associate_final(
+        {(0, 0): {"blue": [0.8 * DEG]}}, {(0, 0): pose}, known, noise_rad=DEG, eps_rad=3 * DEG
+    )
+    assert [(d.name, d.status, d.in_line) for d in one] == [(None, "in line", ("blue#1", "blue#2"))]
+    # two blobs: each is one landmark, told apart by the sharp keyframe
+    two = associate_final(
+        {(0, 0): {"blue": [0.2 * DEG, 1.4 * DEG]}},
+        {(0, 0): pose},
+        known,
+        noise_rad=DEG,
+        eps_rad=3 * DEG,
+    )
+    assert [(d.name, d.status, d.in_line) for d in two] == [
+        ("blue#1", "named", ()),
+        ("blue#2", "named", ()),
+    ]
+    # one of them clearly in front (1 m against 2 m): it takes the blob
+    near = np.array([[1.0, 0.0], 2.0 * np.array([math.cos(1.5 * DEG), math.sin(1.5 * DEG)])])
+    front = associate_final(
+        {(0, 0): {"blue": [0.8 * DEG]}},
+        {(0, 0): pose},
+        _known(near, 0.005),
+        noise_rad=DEG,
+        eps_rad=3 * DEG,
+    )
+    assert [(d.name, d.status) for d in front] == [("blue#1", "named")]

@@ -65,7 +65,8 @@ class Score:
 
     ``n_final_detections``, ``n_final_named``, ``n_final_correct``, ``n_final_nearest``: the
     keyframe detections associated again with the final map once the log is processed (every
-    one, those named, those named right, those named after the nearest in bearing).
+    one; those associated: named, or one blob where named landmarks line up; those associated
+    right; those associated with the nearest in bearing).
     ``errors_m`` is measured on the final map (after names retracted once the log was
     processed), ``errors_last_m`` on the last movement's.
     """
@@ -155,10 +156,18 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
         correct += right
         nearest += near
     final = collect.final.detections if collect.final is not None else []
-    final_named = [(d.name, d) for d in final if d.name is not None and d.movement in keyframes]
-    final_judged = [judge(n, d.movement, d.end, d.bearing_rad) for n, d in final_named]
-    final_correct = sum(right for right, _ in final_judged)
-    final_nearest = sum(near for _, near in final_judged)
+    # associated: named, or one blob where landmarks line up (right when one of them is its
+    # matched landmark within eps, as a blob of two landmarks lined up is a bearing of either)
+    final_named = [
+        ((d.name,) if d.name is not None else d.in_line, d)
+        for d in final
+        if (d.name is not None or d.in_line) and d.movement in keyframes
+    ]
+    final_judged = [
+        [judge(n, d.movement, d.end, d.bearing_rad) for n in names] for names, d in final_named
+    ]
+    final_correct = sum(any(right for right, _ in js) for js in final_judged)
+    final_nearest = sum(any(near for _, near in js) for js in final_judged)
     errors = {n: truth.error_m(t, means[n]) for n, t in matched.items()}
     last_means = {n: e.mean_fl for n, e in last.estimates.items() if "#" in n}
     errors_last = {

@@ -17,6 +17,7 @@ def _record() -> AssociationRecord:
     rows = [
         FinalDetection(0, 0, "blue", 0.1, "blue#1", "named"),
         FinalDetection(0, 0, "blue", 0.2, None, "contested"),
+        FinalDetection(0, 1, "blue", 0.6, None, "in line", ("blue#1", "blue#3")),
         FinalDetection(0, 1, "blue", -0.4, "blue#2", "named"),
         FinalDetection(1, 0, "blue", 1.0, None, "not placed"),
         FinalDetection(1, 0, "magenta/yellow", 2.0, None, "unexplained"),
@@ -27,17 +28,26 @@ def _record() -> AssociationRecord:
 def test_counts_and_line_per_class() -> None:
     record = _record()
     assert record.counts() == {
-        "blue": {"detections": 4, "named": 2, "contested": 1, "unexplained": 0, "not placed": 1},
+        "blue": {
+            "detections": 5,
+            "named": 2,
+            "in line": 1,
+            "contested": 1,
+            "unexplained": 0,
+            "not placed": 1,
+        },
         "magenta/yellow": {
             "detections": 1,
             "named": 0,
+            "in line": 0,
             "contested": 0,
             "unexplained": 1,
             "not placed": 0,
         },
     }
     assert record.text() == (
-        "with the final map, blue: 2 of 4 detections named (1 contested, 1 not placed); "
+        "with the final map, blue: 2 of 5 detections named (1 in line, 1 contested, 1 not "
+        "placed); "
         "magenta/yellow: 0 of 1 detections named (1 unexplained)"
     )
 
