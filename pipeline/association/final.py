@@ -10,9 +10,11 @@ detections again by the rules of :func:`pipeline.association.assign.assign` (gat
 pairs unique by a margin, :data:`FINAL_MARGIN_CHI2`, the nearest of landmarks in line takes
 their blob). Prediction variance: the point's covariance, the keyframe pose's, and the map's
 estimated bearing noise; the bearings it names are not given to the estimator.
-:func:`missing_reports` says when a class whose names are all given still has detections no
-name explains, and where their rays meet (:func:`meeting_point`;
-:meth:`pipeline.association.Associator.repair_final` may then give a doubtful name there).
+A lone blob where named landmarks line up (none clearly in front) is said to be theirs
+("in line"). :func:`missing_reports` says when a class whose names are all given still has
+detections no name explains, and where their rays meet (:func:`meeting_point`;
+:meth:`pipeline.association.Associator.repair_final` may then give a free name, or a doubtful
+one, there).
 """
 
 from __future__ import annotations
@@ -219,17 +221,27 @@ def missing_reports(
             "landmark may be missing from the map, and a name may stand where rays of "
             "several landmarks meet"
         )
-        rays = [
-            Ray.placed(d.movement, d.end, k, d.bearing_rad, p.origin_fl, p.heading_rad)
-            for k, d in enumerate(left)
-            if (p := poses.get((d.movement, d.end))) is not None
-        ]
-        met = meeting_point(rays, eps_rad)
+        met = meeting_point(unexplained_rays(detections, label, poses), eps_rad)
         if met is not None and len(met[1]) >= MISSING_KEYFRAMES:
             x, y = met[0]
             text += f" (rays of {len(met[1])} keyframes meet near ({x:.2f}, {y:.2f}) FL)"
         out[label] = text
     return out
+
+
+def unexplained_rays(
+    detections: Sequence[FinalDetection],
+    label: str,
+    poses: Mapping[tuple[int, int], KeyframePose],
+) -> list[Ray]:
+    """The rays (FL) of the detections of ``label`` the final map left unexplained, at the
+    keyframes ``poses`` holds (``detection``: the index among those unexplained detections)."""
+    left = [d for d in detections if d.label == label and d.status == "unexplained"]
+    return [
+        Ray.placed(d.movement, d.end, k, d.bearing_rad, p.origin_fl, p.heading_rad)
+        for k, d in enumerate(left)
+        if (p := poses.get((d.movement, d.end))) is not None
+    ]
 
 
 def meeting_point(

@@ -67,6 +67,7 @@ from pipeline.association.final import (
     associate_final,
     meeting_point,
     missing_reports,
+    unexplained_rays,
 )
 from pipeline.association.hypotheses import (
     FIT_TOL_EPS,
@@ -349,12 +350,7 @@ class Associator:
             full = len(self.named[label]) >= count
             if full and self._most_doubtful(label) is None:
                 continue
-            left = [d for d in final if d.label == label and d.status == "unexplained"]
-            rays = [
-                Ray.placed(d.movement, d.end, j, d.bearing_rad, p.origin_fl, p.heading_rad)
-                for j, d in enumerate(left)
-                if (p := poses.get((d.movement, d.end))) is not None
-            ]
+            rays = unexplained_rays(final, label, poses)
             while (found := self._final_point(label, rays, mapped)) is not None:
                 h, lines = found
                 out.names.setdefault(label, ([], []))
