@@ -26,8 +26,9 @@ from pipeline.slam import MovementObservation, MovementResult
 #: Keyframe poses of the final map, (movement, end) -> pose.
 Poses = dict[tuple[int, int], KeyframePose]
 #: Once the log is processed, the map is repaired (a free name given, a doubtful one retracted
-#: and given) and associated again at most this many times: a name given frees the detections
-#: it explains, and those left may then point at another landmark.
+#: and given, names under suspicion given anew) and associated again at most this many times:
+#: a name given frees the detections it explains, and those left may then point at another
+#: landmark.
 REPAIR_ROUNDS = 3
 
 
@@ -116,7 +117,8 @@ class AlikeLandmarks:
         """Every keyframe's detections associated with ``estimator``'s final map and what it
         leaves open per class; when the unexplained ones point at a landmark, a free name of
         its class is given to it, or with every name given a doubtful one is retracted and
-        given to it (:meth:`pipeline.association.Associator.repair_final`), the estimator settles
+        given to it, or names under suspicion are given anew where their detections and those
+        meet (:meth:`pipeline.association.Associator.repair_final`), the estimator settles
         (:meth:`pipeline.joint.JointSlam.settle`) and the association is made again, up to
         :data:`REPAIR_ROUNDS` times (None: the estimator does not place its keyframes with
         their covariances)."""

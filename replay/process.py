@@ -149,8 +149,8 @@ def result_line(doc: dict[str, Any]) -> str:
         retracted = [n for c in final.values() for n in c.get("retracted", {})]
         if retracted:
             text += (
-                f"; with the final map, {', '.join(retracted)} given to the landmark the "
-                "unexplained detections point at (doubtful before)"
+                f"; with the final map, {', '.join(retracted)} given anew where the "
+                "detections no name explained point (under suspicion before)"
             )
         missing = [label for label, c in final.items() if "warning" in c]
         if missing:

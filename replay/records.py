@@ -258,8 +258,9 @@ class AssociationRecord:
         Classes whose names are all given but whose detections the final map leaves
         unexplained too often (:func:`pipeline.association.final.missing_reports`).
     retracted : dict name -> str
-        Doubtful names taken back once the log was processed and given to a landmark the
-        final map's unexplained detections point at, with why.
+        Names under suspicion (doubtful, or given few of their predicted detections) taken
+        back once the log was processed and given anew where the final map's unexplained
+        detections point, with why.
     estimates : dict name -> EstimateRecord, or None
         The map after that or after ``named_at_end`` (None: the last movement's map stands).
     placed_by_matching : list of int

@@ -19,7 +19,7 @@ one, there).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -233,10 +233,17 @@ def unexplained_rays(
     detections: Sequence[FinalDetection],
     label: str,
     poses: Mapping[tuple[int, int], KeyframePose],
+    names: Collection[str] = (),
 ) -> list[Ray]:
-    """The rays (FL) of the detections of ``label`` the final map left unexplained, at the
-    keyframes ``poses`` holds (``detection``: the index among those unexplained detections)."""
-    left = [d for d in detections if d.label == label and d.status == "unexplained"]
+    """The rays (FL) of the detections of ``label`` the final map left unexplained, and of
+    those it gave one of ``names``, at the keyframes ``poses`` holds (``detection``: the index
+    among those detections)."""
+    left = [
+        d
+        for d in detections
+        if d.label == label
+        and (d.status == "unexplained" or (d.name is not None and d.name in names))
+    ]
     return [
         Ray.placed(d.movement, d.end, k, d.bearing_rad, p.origin_fl, p.heading_rad)
         for k, d in enumerate(left)

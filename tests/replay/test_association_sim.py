@@ -210,40 +210,30 @@ def test_a_landmark_never_named_during_the_run_is_named_at_the_end(
 @pytest.mark.slow
 @pytest.mark.parametrize("camera", ["unwrapped", "omni"])
 def test_association_over_seeds(camera: str, tmp_path: Path) -> None:
-    # ten layouts per camera, failures included. Every run: no two names on one landmark, and
-    # no more names than landmarks. Over the ten: at least 76 of the 80 landmarks named and at
-    # most 2 names more than 10 cm off their landmark; the runs without such a name associate
-    # at least 97 % of their named bearings correctly, mean error <= 3 cm; and 85 % of all the
-    # detections of the ten are named correctly. Measured: 80 (unwrapped) and 79 (omni)
-    # named, 2 names off in each, 88.2 and 86.4 % of the detections named correctly. Before
-    # names were also searched for among the unnamed detections
-    # (docs/RESULTS.md): 74 and 79 named and no name off on these ten seeds, but more than
-    # twice the names off on seeds 161-260, which neither rule was written on.
-    named = off = correct = detections = final = false_warnings = 0
+    # issue 11's goals for 8 identical landmarks beyond a distinct reference pair, on ten
+    # layouts per camera: in every run all 8 named, each name on its own landmark (none twice,
+    # none more than 10 cm off, mean <= 3 cm), and with the final map at least 98 % of the
+    # ten runs' detections associated right. Measured: 99.45 % (unwrapped) and 99.48 % (omni),
+    # none wrong (the rest contested or unexplained, and said so), every run at 97.3 % or more,
+    # worst landmark 3.0 and 3.8 cm. Before the names under suspicion were given anew once the
+    # log was processed (docs/RESULTS.md), omni seed 3 ended with two names 28 and 47 cm off.
+    correct = final = detections = wrong = false_warnings = 0
     for seed in range(1, 11):
         _, s = _simulated(camera, seed, tmp_path)
+        assert s.n_named == 8 and len(set(s.matched.values())) == 8, seed
+        assert max(s.errors_m.values()) <= 0.10, (seed, s.errors_m)
+        assert sum(s.errors_m.values()) / 8 <= 0.03, (seed, s.errors_m)
+        assert s.n_final_correct >= 0.97 * s.n_final_detections, seed
         correct += s.n_correct
         final += s.n_final_correct
+        wrong += s.n_final_named - s.n_final_correct
         detections += s.n_detections
-        assert len(set(s.matched.values())) == s.n_named <= 8, seed
-        wrong = [e for e in s.errors_m.values() if e > 0.10]
-        off += len(wrong)
-        if s.n_named == 8:  # the final map warns when a name is off (seed 3), else not
-            warned = "warning" in s.summary["association"]["final_map"]["blue"]
-            false_warnings += warned and not wrong
-            assert warned or not wrong, seed
-        repaired = "retracted" in s.summary["association"]["final_map"]["blue"]
-        if not wrong and not repaired:  # a name retracted at the end was wrong before it
-            assert s.correct_share >= 0.97, (seed, s.correct_share)
-            assert sum(s.errors_m.values()) / s.n_named <= 0.03, (seed, s.errors_m)
-        named += s.n_named
-    assert named >= 76, named
-    assert off <= 2, off
-    # most detections get their right name, at their keyframe or with the name they led to
+        false_warnings += "warning" in s.summary["association"]["final_map"]["blue"]
+    assert final >= 0.98 * detections, (final, detections)
+    assert wrong <= 0.005 * detections, wrong  # what is not right is mostly said to be unsure
+    # at their keyframes (or with the name they led to), before the final map: 88.2 / 86.4 %
     assert correct >= 0.85 * detections, (correct, detections)
-    # and nearly all with the final map (measured: 98.1 and 96.3 %)
-    assert final >= 0.95 * detections, (final, detections)
-    assert false_warnings <= 1  # measured: none
+    assert false_warnings <= 1  # every name right: a warning would be false (measured: none)
 
 
 @pytest.mark.slow
@@ -318,7 +308,7 @@ def test_names_off_their_landmark_are_reported_doubtful(
     final_doubtful = s.summary["association"]["doubtful"]
     assert set(final_doubtful) == set(doubtful) - off
     assert f"doubtful: {', '.join(sorted(final_doubtful))}" in result_line(s.summary)
-    assert f"with the final map, {', '.join(sorted(off))} given to" in result_line(s.summary)
+    assert f"with the final map, {', '.join(sorted(off))} given anew" in result_line(s.summary)
     # and in Rerun: the final map labels the doubtful names, the log says why (read back
     # with Rerun's reader)
     last, rows = _replayed(log, tmp_path)
@@ -424,11 +414,34 @@ def test_a_name_off_its_landmark_is_retracted_once_the_log_is_processed(tmp_path
     assert s.n_named == 8 and max(s.errors_m.values()) <= 0.10
     assert "doubtful" not in s.summary["association"]
     output, msg = _processed(log, tmp_path)
-    assert "with the final map, blue#6 given to the landmark" in output
+    assert "with the final map, blue#6 given anew where" in output
     assert [r["name"] for r in msg["retracted"]] == ["blue#6"]
     final = {r["name"]: r["mean"] for r in msg["landmarks"]}
     assert final.keys() == s.summary["landmarks"].keys()
     assert final["blue#6"] == pytest.approx(s.summary["landmarks"]["blue#6"]["mean"], abs=1e-8)
+
+
+@pytest.mark.slow
+def test_two_names_between_two_landmarks_are_given_anew_once_the_log_is_processed(
+    tmp_path: Path,
+) -> None:
+    # omni seed 3: B4 and B7 at the arena's left edge, 16 degrees apart from the path, seen
+    # from its right only; the run names both from each other's rays (blue#6 and blue#8, 28
+    # and 47 cm off, doubtful), the final map gives each some of both landmarks' detections
+    # and leaves 19 unexplained, too few at any one point to name a landmark by themselves.
+    # Their detections and the unexplained ones meet at two points: the names go there
+    log, s, off = _off_names("omni", 3, tmp_path)
+    assert off == {"blue#6", "blue#8"} and off <= set(_doubtful_last(s))
+    retracted = _retracted_at_end(s)
+    assert set(retracted) == off
+    assert all("given anew once the log was processed" in why for why in retracted.values())
+    assert s.n_named == 8 and len(set(s.matched.values())) == 8
+    assert max(s.errors_m.values()) <= 0.03, s.errors_m
+    assert s.n_final_correct == s.n_final_detections  # every detection right, none unexplained
+    assert "warning" not in s.summary["association"]["final_map"]["blue"]
+    output, msg = _processed(log, tmp_path)
+    assert "with the final map, blue#6, blue#8 given anew where" in output
+    assert sorted(r["name"] for r in msg["retracted"]) == ["blue#6", "blue#8"]
 
 
 @pytest.mark.slow
