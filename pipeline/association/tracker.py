@@ -118,12 +118,13 @@ DISCOVER_SEEN_SHARE = 0.8
 #: and its class was detected at DISCOVER_FAN_SEEN_SHARE of the keyframes where predicted.
 DISCOVER_FAN_KEYFRAMES = 12
 DISCOVER_FAN_SEEN_SHARE = 0.9
-#: Once the log is processed, the names of a class under suspicion (its doubtful ones; else the
-#: one, then the REBUILD_SUSPECTS, the final association gives a detection at the smallest share
-#: of their predictions) are given anew where their detections and those the final map left
-#: unexplained meet, when those points explain REBUILD_GAIN detections more than the names do.
-#: Measured on 960 simulated runs of 8 identical landmarks (docs/RESULTS.md): 5 runs with a name
-#: 10-101 cm off end with every name within 10 cm, none changed for the worse.
+#: Once the log is processed, the names of a class under suspicion (its doubtful ones; then the
+#: one, then the REBUILD_SUSPECTS, the final map does not hold or, after those, gives a
+#: detection at the smallest share of their predictions) are given anew where their detections
+#: and those the final map left unexplained meet, when those points explain REBUILD_GAIN
+#: detections more than the names do. Measured on 960 simulated runs of 8 identical landmarks
+#: (docs/RESULTS.md): 13 runs with a name 10-101 cm off or a landmark unnamed end with all 8
+#: named within 10 cm, none changed for the worse.
 REBUILD_SUSPECTS = 2
 REBUILD_GAIN = 8
 #: A hypothesis sharing a ray with another is confirmed only when seen along this many more
@@ -401,7 +402,7 @@ class Associator:
         more than the names do; each point gets the name nearest to it, unless within
         :data:`FINAL_APART_CHI2` of it already."""
         share = {n: self._final_share(n, final, poses, mapped) for n in self.named[label]}
-        weakest = sorted(share, key=share.__getitem__)
+        weakest = sorted(share, key=lambda n: (n in mapped, share[n]))  # unmapped: none given
         doubtful = [n for n in self.named[label] if self.support[n].doubt() is not None]
         suspects = [doubtful] if doubtful else []
         suspects += [weakest[:k] for k in range(1, REBUILD_SUSPECTS + 1)]
@@ -433,7 +434,11 @@ class Associator:
         for k, n in given.items():
             h, lines = found[k]
             x, y = h.point_fl
-            seen = f"given a detection at {100 * share[n]:.0f} % of the keyframes where predicted"
+            seen = (
+                f"given a detection at {100 * share[n]:.0f} % of the keyframes where predicted"
+                if n in mapped
+                else "not in the final map (its bearings never met at one point)"
+            )
             why = (
                 f"{self.support[n].doubt() or seen}; given anew once the log was processed: "
                 f"with the detections the final map left unexplained, those of "

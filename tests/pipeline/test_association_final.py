@@ -16,7 +16,7 @@ from pipeline.association.final import (
     meeting_point,
     missing_reports,
 )
-from pipeline.association.hypotheses import Ray
+from pipeline.association.hypotheses import Ray, fit
 from pipeline.association.predict import predict_bearings
 from pipeline.association.support import Support
 from pipeline.estimate import LandmarkEstimate
@@ -406,3 +406,29 @@ def test_a_name_the_final_map_rarely_gives_moves_where_its_rays_meet_the_unexpla
         assert np.linalg.norm(assoc.unmapped["blue#2"].point_fl - landmarks[1]) < 0.02
         assert out.retracted["blue#2"].startswith("given a detection at")
         assert f"explain 20 detections against {given}" in out.retracted["blue#2"]
+
+
+def test_a_name_the_estimator_never_mapped_is_the_first_suspect() -> None:
+    # blue#2 was named from rays meeting 28 cm off any landmark and the estimator never took
+    # it (the associator holds only its hypothesis): the final map gives it nothing, and the
+    # 20 detections of the landmark it should be are unexplained. blue#1 and blue#3, given
+    # their detection at 18 of 20 keyframes, are the names with the smallest share among those
+    # mapped; the one the map lacks is suspected first and goes where the 20 meet
+    rng = np.random.default_rng(11)
+    landmarks = np.array([[0.0, 0.5], [1.2, 1.0], [1.6, -0.2]])
+    origins = rng.uniform((-0.5, -1.0), (2.5, 0.3), (20, 2))
+    names = [["blue#1", None, "blue#3"]] * 18 + [[None, None, None]] * 2
+    final, poses = _seen_from(origins, landmarks, names, 12)
+    assoc, mapped = _full_class({"blue#1": landmarks[0], "blue#3": landmarks[2]})
+    assoc.capacity["blue"] = 3
+    ghost = np.array([1.5, 1.3])
+    rays = _rays_to(ghost, 6, rng)
+    h = fit("blue", rays, 3.0 * DEG, 1.0 * DEG, ghost)
+    assert h is not None and np.linalg.norm(h.point_fl - ghost) < 0.05
+    assoc.named["blue"] = ["blue#1", "blue#2", "blue#3"]
+    assoc.unmapped["blue#2"] = h
+    assoc.support["blue#2"] = Support(0, seen=8)
+    out = assoc.repair_final(final, poses, mapped, 10)
+    assert out is not None and list(out.retracted) == ["blue#2"]
+    assert np.linalg.norm(assoc.unmapped["blue#2"].point_fl - landmarks[1]) < 0.02
+    assert out.retracted["blue#2"].startswith("not in the final map")
