@@ -1109,9 +1109,9 @@ class Associator:
         out: MovementAssociation,
         why: str | None = None,
     ) -> None:
-        """Take ``name`` from the doubtful landmark it was given to (the estimator forgets it
-        and every bearing given to it) and give it to ``h``, which the full catalog kept out
-        (``why``: another reason, said instead)."""
+        """Take ``name`` from the landmark it was given to, a doubtful one (the estimator
+        forgets it and every bearing given to it), and give it to ``h``, which the full catalog
+        kept out (``why``: another reason, said instead)."""
         out.retracted[name] = why or (
             f"{self.support[name].doubt()}; retracted: the name goes to a landmark of {label} "
             f"seen along {lines} lines of sight at ({h.point_fl[0]:.2f}, {h.point_fl[1]:.2f}) "
