@@ -432,3 +432,29 @@ def test_a_name_the_estimator_never_mapped_is_the_first_suspect() -> None:
     assert out is not None and list(out.retracted) == ["blue#2"]
     assert np.linalg.norm(assoc.unmapped["blue#2"].point_fl - landmarks[1]) < 0.02
     assert out.retracted["blue#2"].startswith("not in the final map")
+
+
+def test_the_meeting_point_of_many_rays_is_found_among_a_share_of_their_crossings() -> None:
+    # 120 keyframes: 30 see P, 25 each see one of five other landmarks, every one has a stray
+    # blob (10 degrees or more off what it sees): 9,988 crossings ahead of both rays, so every
+    # 2nd is tested; P, seen from the most keyframes, is still found, with its ray of every
+    # keyframe that sees it (and rays of others that pass near it by chance). Testing every
+    # 10th crossing misses it.
+    rng = np.random.default_rng(21)
+    p = np.array([0.4, 1.7])
+    others = rng.uniform((-1.5, 0.5), (1.5, 2.5), (5, 2))
+    origins = rng.uniform((-1.0, -1.0), (1.0, 1.0), (120, 2))
+    rays = []
+    for k, o in enumerate(origins):
+        seen = [p] if k < 30 else [others[(k - 30) // 18]] if k < 120 else []
+        for j, point in enumerate(seen):
+            b = math.atan2(*(point - o)[::-1]) + np.clip(rng.normal(0.0, DEG), -3 * DEG, 3 * DEG)
+            rays.append(Ray.placed(k, 0, j, float(b), o, 0.0))
+        away = math.atan2(*(seen[0] - o)[::-1]) + rng.choice((-1.0, 1.0)) * rng.uniform(
+            10 * DEG, math.pi
+        )
+        rays.append(Ray.placed(k, 0, 1, float(away), o, 0.0))
+    met = meeting_point(rays, 3 * DEG)
+    assert met is not None
+    assert np.hypot(*(met[0] - p)) < 0.02
+    assert sum(r.movement < 30 and r.detection == 0 for r in met[1]) == 30
