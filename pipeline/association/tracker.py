@@ -416,7 +416,8 @@ class Associator:
                 found.append(f)
                 rays = [r for r in rays if (r.movement, r.end, r.detection) not in f[0].keys]
             before = sum(d.name in names for d in final)
-            if sum(len(h.rays) for h, _ in found) >= before + REBUILD_GAIN:
+            explained = sum(len(h.rays) for h, _ in found)
+            if explained >= before + REBUILD_GAIN:
                 break
         else:
             return
@@ -443,7 +444,7 @@ class Associator:
                 f"{self.support[n].doubt() or seen}; given anew once the log was processed: "
                 f"with the detections the final map left unexplained, those of "
                 f"{', '.join(names)} meet at {len(found)} point(s), which explain "
-                f"{sum(len(f[0].rays) for f in found)} detections against {before}; this one "
+                f"{explained} detections against {before}; this one "
                 f"at ({x:.2f}, {y:.2f}) FL along {lines} lines of sight"
             )
             self._give_name(label, h, lines, out, searched=True, retract=n, why=why)
