@@ -47,6 +47,16 @@ _TOPIC_LIST = [
     ),
     Topic("/robot/odometry", "bslam.Odometry", "wheel encoder counters"),
     Topic(
+        "/robot/odometry_pose",
+        "bslam.OdometryPose",
+        "pose integrated from wheel odometry (m, rad, odometry frame), a driving robot's motion",
+    ),
+    Topic(
+        "/sensor/bearings",
+        "bslam.BearingSet",
+        "landmark bearings from any front end (beacon sensor, fiducials, another pipeline)",
+    ),
+    Topic(
         "/robot/movement",
         "bslam.Movement",
         "movement index, phase (start/end), keyframe at rest, commanded turn and distance",

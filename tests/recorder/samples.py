@@ -62,6 +62,15 @@ def sample_messages(t_ns: int, rng: np.random.Generator) -> dict[str, dict[str, 
             "attempt": 1,
         },
         "/robot/odometry": {"timestamp": stamp, "left_pulses": 10, "right_pulses": -4},
+        "/robot/odometry_pose": {"timestamp": stamp, "x_m": 1.5, "y_m": -0.25, "theta_rad": 0.5},
+        "/sensor/bearings": {
+            "timestamp": stamp,
+            "source": "beacon sensor",
+            "bearings": [
+                {"landmark": "L1", "bearing_rad": 0.25},
+                {"landmark": "L2", "bearing_rad": -2.0, "std_rad": 0.01},
+            ],
+        },
         "/robot/movement": {
             "timestamp": stamp,
             "index": 0,
