@@ -59,6 +59,17 @@ def to_fl(
     return np.stack(((ux * dx + uy * dy) / n2, (uy * dx - ux * dy) / n2), axis=-1)
 
 
+def from_fl(
+    z_fl: NDArray[np.float64], s1: NDArray[np.float64], s2: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The inverse of :func:`to_fl`: points (..., 2) of the frame ``s1 -> (0,0), s2 -> (1,0)``
+    back where ``s1`` and ``s2`` are (broadcasting)."""
+    dx = s2[..., 0] - s1[..., 0]
+    dy = s2[..., 1] - s1[..., 1]
+    u, v = z_fl[..., 0], z_fl[..., 1]
+    return np.stack((s1[..., 0] + u * dx - v * dy, s1[..., 1] + u * dy + v * dx), axis=-1)
+
+
 def _pairs_fl(
     s1: NDArray[np.float64], s2: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
