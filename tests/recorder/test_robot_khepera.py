@@ -12,6 +12,7 @@ from typing import Any
 import jsonschema
 import numpy as np
 import pytest
+import serial
 
 from data_schemas.codec import validate_message
 from data_schemas.registry import schema_dict
@@ -26,6 +27,7 @@ from recorder.robot import (
     RobotProtocolError,
     RobotTimeout,
     SerialPortError,
+    open_serial,
 )
 from recorder.sim.fake_khepera import FakeKhepera, PtyServer
 
@@ -99,11 +101,30 @@ def test_each_command(
     assert log[1]["reply"] == "d" and log[2]["reply"] == "e,3,-3"
 
 
-def test_messages_carry_clock_time(robot: KheperaRobot, clock: VirtualClock, log: Log) -> None:
+def test_messages_carry_clock_time_and_latency_in_ns(
+    robot: KheperaRobot,
+    fake: FakeKhepera,
+    clock: VirtualClock,
+    log: Log,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    answer = fake.handle_line
+
+    def slow(line: bytes) -> Any:  # the device takes 3.456789 ms of clock time per request
+        if line.strip():
+            clock.advance_ns(3_456_789)
+        return answer(line)
+
+    monkeypatch.setattr(fake, "handle_line", slow)
     clock.advance_ns(1_500_000_123)
     robot.read_position_counters()
-    assert ns_from_stamp(log[0]["timestamp"]) == 1_500_000_123
-    assert log[0]["latency_ns"] == 0  # virtual time does not move during the exchange
+    fake.inject("timeout", letter="H")  # lost: the clock still moves, no reply
+    robot.read_position_counters()
+    assert [m["outcome"] for m in log] == ["ok", "timeout", "ok"]
+    assert ns_from_stamp(log[0]["timestamp"]) == 1_500_000_123  # when the request was sent
+    assert ns_from_stamp(log[1]["timestamp"]) == 1_500_000_123 + 3_456_789
+    assert [m["latency_ns"] for m in log] == [3_456_789] * 3
+    assert clock.monotonic_ns() == 1_500_000_123 + 3 * 3_456_789
     assert "detail" not in log[0]
 
 
@@ -208,18 +229,6 @@ def test_unknown_url_scheme(clock: VirtualClock) -> None:
         KheperaRobot.open(RobotConfig(port="nope://robot"), clock)
 
 
-def test_port_is_8n2_at_the_configured_baud(config: RobotConfig, clock: VirtualClock) -> None:
-    with KheperaRobot.open(dataclasses.replace(config, baudrate=38400), clock):
-        fd = os.open(config.port, os.O_RDWR | os.O_NOCTTY)  # what the device was set to
-        try:
-            _, _, cflag, _, ispeed, ospeed, _ = termios.tcgetattr(fd)
-        finally:
-            os.close(fd)
-    assert (ispeed, ospeed) == (termios.B38400, termios.B38400)
-    assert cflag & termios.CSIZE == termios.CS8
-    assert cflag & termios.CSTOPB and not cflag & termios.PARENB
-
-
 @pytest.mark.parametrize(
     "field, value",
     [("baudrate", 0), ("retries", 11), ("retries", -1), ("mm_per_pulse", 0.0),
@@ -257,11 +266,32 @@ def test_settings_a_khepera_cannot_use_are_refused(
 
 
 @pytest.mark.parametrize("baudrate", [9600, 19200, 38400, 57600, 115200])
-def test_every_khepera_baud_rate_opens(
+def test_every_khepera_baud_rate_is_set_8n2_on_the_port(
     config: RobotConfig, clock: VirtualClock, baudrate: int
 ) -> None:
-    with KheperaRobot.open(dataclasses.replace(config, baudrate=baudrate), clock) as robot:
+    speed = getattr(termios, f"B{baudrate}")  # the pty's termios speed code
+    cfg = dataclasses.replace(config, baudrate=baudrate)
+    port = open_serial(cfg)
+    try:  # the pyserial object itself
+        assert isinstance(port, serial.Serial)
+        assert (port.baudrate, port.bytesize, port.parity, port.stopbits) == (
+            baudrate,
+            serial.EIGHTBITS,
+            serial.PARITY_NONE,
+            serial.STOPBITS_TWO,
+        )
+    finally:
+        port.close()
+    with KheperaRobot.open(cfg, clock) as robot:
+        fd = os.open(config.port, os.O_RDWR | os.O_NOCTTY)  # what the device was set to
+        try:
+            _, _, cflag, _, ispeed, ospeed, _ = termios.tcgetattr(fd)
+        finally:
+            os.close(fd)
         assert robot.version() == "5.02,5.01"
+    assert (ispeed, ospeed) == (speed, speed)
+    assert cflag & termios.CSIZE == termios.CS8
+    assert cflag & termios.CSTOPB and not cflag & termios.PARENB
 
 
 def test_version_needs_bios_and_protocol_fields(
