@@ -2,17 +2,23 @@
 
 from __future__ import annotations
 
+import io
+import struct
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from mcap.exceptions import EndOfFile
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
+from mcap.records import Channel, Chunk, McapRecord, Message
+from mcap.stream_reader import StreamReader, breakup_chunk
 
 from data_schemas.errors import CorruptLogError, LogError
 from data_schemas.mcap.info import log_summary
 from data_schemas.mcap.processable import ProcessableLog
-from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.recover import recover_log
 from data_schemas.mcap.writer import LogWriter
 from recorder.clock import VirtualClock
@@ -35,34 +41,82 @@ def _log(path: Path, frames: int, chunk_bytes: int) -> None:
             clock.sleep(0.01)
 
 
-@pytest.fixture(scope="module", params=[(40, 10**8), (50, 100)], ids=["1-chunk", "100-chunks"])
+@pytest.fixture(
+    scope="module",
+    params=[(40, 10**8), (50, 100), (50, 6000)],
+    ids=["1-chunk", "1-message-chunks", "several-message-chunks"],
+)
 def finished(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Path:
     frames, chunk_bytes = request.param
     path = tmp_path_factory.mktemp("logs") / "a.mcap"
     _log(path, frames, chunk_bytes)
-    with path.open("rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None
-    assert len(summary.chunk_indexes) == (1 if frames == 40 else 100)
+    chunks = [r for r, _ in _library_records(path.read_bytes()) if isinstance(r, Chunk)]
+    sizes = [sum(isinstance(r, Message) for r in breakup_chunk(c)) for c in chunks]
+    if chunk_bytes == 10**8:
+        assert sizes == [2 * frames]
+    elif chunk_bytes == 100:
+        assert sizes == [1] * (2 * frames)
+    else:  # a cut inside a chunk leaves whole messages before it
+        assert len(sizes) >= 5 and min(sizes[:-1]) >= 3
     return path
 
 
+def _library_records(data: bytes) -> Iterator[tuple[McapRecord, int]]:
+    """The records the mcap library reads whole from ``data``, each with its end offset."""
+    stream = io.BytesIO(data)
+    try:
+        for record in StreamReader(stream, emit_chunks=True, validate_crcs=True).records:
+            yield record, stream.tell()
+    except (EndOfFile, struct.error):
+        return
+
+
+def _spans(data: bytes) -> list[tuple[Msg, int, int]]:
+    """Every message the mcap library reads from ``data``, with its record's file span.
+
+    A stored chunk's records are its record's last field: they end where the chunk ends, and
+    each inside is opcode (1 byte), length (8 bytes), content (the MCAP specification).
+    """
+    topics: dict[int, str] = {}
+    out: list[tuple[Msg, int, int]] = []
+    for record, end in _library_records(data):
+        assert not isinstance(record, Message)  # the recorder writes every message in a chunk
+        if isinstance(record, Channel):
+            topics[record.id] = record.topic
+        if not isinstance(record, Chunk):
+            continue
+        assert record.compression == ""
+        base = end - len(record.data)
+        inner = iter(breakup_chunk(record, validate_crc=True))
+        pos = 0
+        while pos < len(record.data):
+            opcode, length = struct.unpack_from("<BQ", record.data, pos)
+            stop = pos + 9 + length
+            if opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+                rec = next(inner)
+                if isinstance(rec, Channel):
+                    topics[rec.id] = rec.topic
+                elif isinstance(rec, Message):
+                    msg = (topics[rec.channel_id], rec.sequence, rec.log_time, rec.data)
+                    assert data[base + stop - len(rec.data) : base + stop] == rec.data
+                    out.append((msg, base + pos, base + stop))
+            pos = stop
+    return out
+
+
+def _metadata(path: Path) -> list[tuple[str, dict[str, str]]]:
+    with path.open("rb") as f:
+        return [(m.name, dict(m.metadata)) for m in make_reader(f).iter_metadata()]
+
+
 def _messages(path: Path) -> list[Msg]:
-    with LogReader(path, allow_unfinished=True, allow_corrupt=True) as reader:
-        return [(m.topic, m.sequence, m.log_time_ns, m.data) for m in reader.messages()]
-
-
-def _spans(path: Path) -> list[tuple[Msg, int, int]]:
-    """Every message of a finished log with the file span of its record (start, end)."""
-    data = path.read_bytes()
-    spans = []
-    pos = 0
-    for m in _messages(path):
-        at = data.find(m[3], pos)
-        assert at > 0
-        spans.append((m, at - 31, at + len(m[3])))  # 31: opcode, length and message fields
-        pos = at
-    return spans
+    """The messages of a finished log as the mcap library reads them (CRCs checked)."""
+    with path.open("rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        return [
+            (channel.topic, m.sequence, m.log_time, m.data)
+            for _, channel, m in reader.iter_messages(log_time_order=False)
+        ]
 
 
 def _offsets(size: int, n: int, seed: int) -> list[int]:
@@ -73,24 +127,26 @@ def _offsets(size: int, n: int, seed: int) -> list[int]:
 
 def test_cut_anywhere_keeps_every_complete_message(finished: Path, tmp_path: Path) -> None:
     data = finished.read_bytes()
-    spans = _spans(finished)
+    spans = _spans(data)
+    assert [m for m, _, _ in spans] == _messages(finished)
     broken, fixed = tmp_path / "cut.mcap", tmp_path / "fixed.mcap"
     for cut in _offsets(len(data), 80, seed=1):
         broken.write_bytes(data[:cut])
         want = [m for m, _, end in spans if end <= cut]
+        # the chunks the library itself reads whole from the cut bytes come first
+        whole = [m for m, _, _ in _spans(data[:cut])]
+        assert want[: len(whole)] == whole, cut
         if not want and cut < spans[0][1]:
             continue  # nothing to keep: "nothing readable" is covered below
         report = recover_log(broken, fixed, force=True)
         assert report.messages == len(want), cut
-        with LogReader(fixed) as reader:
-            got = [(m.topic, m.sequence, m.log_time_ns, m.data) for m in reader.messages()]
-        assert got == want, cut
-        assert reader.metadata == LogReader(finished).metadata
+        assert _messages(fixed) == want, cut
+        assert _metadata(fixed) == _metadata(finished)
 
 
 def test_one_flipped_byte_anywhere(finished: Path, tmp_path: Path) -> None:
     data = finished.read_bytes()
-    spans = _spans(finished)
+    spans = _spans(data)
     with finished.open("rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None
@@ -105,9 +161,13 @@ def test_one_flipped_byte_anywhere(finished: Path, tmp_path: Path) -> None:
         if offset >= first_chunk:  # header and metadata strings carry no CRC
             assert s.damage and not s.finished, offset
         report = recover_log(broken, fixed, force=True)
-        kept = set(_messages(fixed))
-        lost = [m for m, start, end in spans if not start <= offset < end and m not in kept]
-        assert lost == [], offset
+        got = _messages(fixed)
+        assert report.messages == len(got), offset
+        # every message whose record the flip missed comes back (those salvaged from a damaged
+        # chunk in another order); the one it hit (if any) comes back changed or not at all
+        others = [m for m, start, end in spans if not start <= offset < end]
+        assert sorted(m for m in got if m in set(others)) == sorted(others), offset
+        assert len(others) <= len(got) <= len(spans), offset
         if offset >= first_chunk:
             assert report.damage
 
@@ -119,15 +179,18 @@ def test_recover_exit_codes(finished: Path, tmp_path: Path) -> None:
     assert whole.exit_code == 0, whole.output
     assert "already finished" in whole.output
     data = bytearray(finished.read_bytes())
-    spans = _spans(finished)
+    spans = _spans(bytes(data))
     middle = spans[len(spans) // 2]
     data[middle[2] - 3] ^= 0x20  # inside a message's JSON: the chunk CRC fails
+    topic, sequence, log_time, payload = middle[0]
+    changed = (topic, sequence, log_time, payload[:-3] + bytes([payload[-3] ^ 0x20]) + payload[-2:])
     broken = tmp_path / "broken.mcap"
     broken.write_bytes(bytes(data))
     lossy = runner.invoke(cli, ["recover", str(broken), str(fixed), "--force"])
     assert lossy.exit_code == 3, lossy.output
     assert "CRC mismatch" in lossy.output and "messages salvaged" in lossy.output
-    assert len(_messages(fixed)) == len(spans)  # all complete records kept
+    # all complete records kept, the damaged one as it now is
+    assert _messages(fixed) == [changed if s is middle else s[0] for s in spans]
     garbage = tmp_path / "garbage.mcap"
     garbage.write_bytes(bytes(data[:8]) + b"\xee" * 500)
     nothing = runner.invoke(cli, ["recover", str(garbage), str(tmp_path / "none.mcap")])
