@@ -84,6 +84,24 @@ _TOPIC_LIST = [
         "bslam.Estimate",
         "derived: map after one movement (means, covariances in FL) or why it was skipped",
     ),
+    # Derived logs, the same results in Foxglove's well-known schemas (its 3D panel), frame FL.
+    Topic("/pipeline/map", "foxglove.SceneUpdate", "derived: the map (landmarks, 80% ellipses)"),
+    Topic(
+        "/pipeline/keyframe_poses",
+        "foxglove.PosesInFrame",
+        "derived: one movement's keyframe poses (O1, O2, heading O1 -> O2) in FL",
+    ),
+    Topic(
+        "/pipeline/trajectory",
+        "foxglove.PosesInFrame",
+        "derived: every keyframe pose so far in FL",
+    ),
+    Topic("/pipeline/tf", "foxglove.FrameTransform", "derived: fl -> robot at each end keyframe"),
+    Topic(
+        "/pipeline/particles",
+        "foxglove.PointCloud",
+        "derived: the belief's particles in FL (fields x, y, z, landmark)",
+    ),
     Topic(
         "/pipeline/association",
         "bslam.Association",

@@ -6,6 +6,12 @@ method), then ``/pipeline/bearings`` per processed frame and ``/pipeline/particl
 ``/pipeline/particles_fl``, ``/pipeline/estimate`` per movement, each at the ``log_time`` of the
 source frame it comes from, so source and derived logs line up in time; with landmarks that look
 alike, ``/pipeline/association`` at the end (every keyframe detection with the final map).
+
+Beside them, the same results in Foxglove's well-known schemas (:mod:`.foxglove`), so that its 3D
+panel shows the map: ``/pipeline/map`` (``foxglove.SceneUpdate``, after each movement and for the
+final map), ``/pipeline/keyframe_poses`` and ``/pipeline/trajectory``
+(``foxglove.PosesInFrame``), ``/pipeline/tf`` (``foxglove.FrameTransform`` ``fl`` -> ``robot``)
+and ``/pipeline/particles`` (``foxglove.PointCloud``).
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ from numpy.typing import NDArray
 
 from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import schema_dict
-from data_schemas.stamps import stamp_from_ns
+from data_schemas.stamps import Stamp, stamp_from_ns
 from pipeline.bearings.detection import Detection
 from replay.records import (
     AssociationRecord,
@@ -30,6 +36,8 @@ from replay.records import (
     MovementRecord,
     RunInfo,
 )
+from replay.sinks import foxglove
+from replay.sinks.palette import ELLIPSE_RGB, landmark_rgb
 
 
 class SettableClock:
@@ -127,9 +135,12 @@ class DerivedLogSink:
         self._clock = SettableClock()
         self._writer: LogWriter | None = None
         self._run: RunInfo | None = None
+        self._rgb: dict[str, tuple[int, int, int]] = {}
+        self._trajectory: list[foxglove.Pose2] = []
 
     def start(self, run: RunInfo) -> None:
         self._run = run
+        self._rgb = landmark_rgb(run.session)
         doc = dict(run.session.doc)
         doc["derived"] = {
             "source": run.log_name,
@@ -197,6 +208,28 @@ class DerivedLogSink:
                 "o2": record.o2_fl.mean(axis=0).tolist(),
             }
         self._write(t, "/pipeline/estimate", estimate)
+        self._foxglove_movement(record)
+
+    def _foxglove_movement(self, record: MovementRecord) -> None:
+        """One movement's results in Foxglove's schemas (:mod:`.foxglove`)."""
+        stamp = stamp_from_ns(record.timestamp_ns)
+        t = record.log_time_ns
+        if record.ok and record.o1_fl is not None and record.o2_fl is not None:
+            poses = foxglove.keyframe_poses(record.o1_fl, record.o2_fl)
+            self._trajectory += poses
+            self._write(t, "/pipeline/keyframe_poses", foxglove.poses_in_frame(stamp, poses))
+            self._write(t, "/pipeline/trajectory", foxglove.poses_in_frame(stamp, self._trajectory))
+            self._write(t, "/pipeline/tf", foxglove.robot_transform(stamp, poses[1]))
+        if record.particles_fl:
+            self._write(t, "/pipeline/particles", foxglove.point_cloud(stamp, record.particles_fl))
+        if record.estimates:
+            self._write_map(t, stamp, record.estimates)
+
+    def _write_map(
+        self, log_time_ns: int, stamp: Stamp, estimates: Mapping[str, EstimateRecord]
+    ) -> None:
+        msg = foxglove.scene_update(stamp, estimates, self._rgb, ELLIPSE_RGB)
+        self._write(log_time_ns, "/pipeline/map", msg)
 
     def association(self, record: AssociationRecord) -> None:
         rows = []
@@ -225,6 +258,8 @@ class DerivedLogSink:
         if record.placed_by_matching:
             msg["placed_by_matching"] = list(record.placed_by_matching)
         self._write(record.log_time_ns, "/pipeline/association", msg)
+        if record.estimates is not None:
+            self._write_map(record.log_time_ns, msg["timestamp"], record.estimates)
 
     def finish(self) -> None:
         if self._writer is not None:

@@ -44,9 +44,7 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from data_schemas.calibration import Calibration, UnwrappedCalibration
-from data_schemas.colors import NOMINAL_BGR
 from data_schemas.session import Session, shared_classes
-from pipeline.association.tracker import slot_name
 from replay.fig1 import log_fig1
 from replay.records import (
     AssociationRecord,
@@ -55,28 +53,15 @@ from replay.records import (
     MovementRecord,
     RunInfo,
 )
+from replay.sinks.palette import ELLIPSE_RGB, TRAJECTORY_RGB, TRUTH_RGB, landmark_rgb
 from replay.truth import errors_m
 
 LOG_TIME = "log_time"
 MOVEMENT = "movement"
 Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
 FR_APEXES = ((0.0, 0.0), (1.0, 0.0))
-ELLIPSE_RGB = (190, 150, 255)  # 80% regions: a hue no landmark class uses
-TRUTH_RGB = (240, 240, 240)
-TRAJECTORY_RGB = (255, 160, 0)
 #: frames gathered before their entities are sent (as columns) to the recording
 BATCH_FRAMES = 64
-
-
-def landmark_rgb(session: Session) -> dict[str, tuple[int, int, int]]:
-    """Display colour (RGB) of each catalog landmark: its nominal colour (top band if coded)."""
-    out = {}
-    for spec in session.landmarks:
-        b, g, r = NOMINAL_BGR.get(spec.bands[0] if spec.bands else str(spec.color), (200, 200, 200))
-        out[spec.name] = (r, g, b)
-    for label, names in shared_classes(session.landmarks).items():  # red#1 ... as their class
-        out.update({slot_name(label, k): out[names[0]] for k in range(1, len(names) + 1)})
-    return out
 
 
 def shorten(

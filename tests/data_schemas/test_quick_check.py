@@ -59,9 +59,9 @@ def real_docs(tmp_path_factory: pytest.TempPathFactory) -> list[tuple[str, Any]]
 
 def test_every_real_document_passes_without_jsonschema(real_docs: list[tuple[str, Any]]) -> None:
     kinds = {schema for schema, _ in real_docs}
-    # raw (6 channels, Foxglove's image and log among them), derived (4), scenario, session and
-    # calibration (unwrapped and omni) documents
-    assert len(kinds) == 13, sorted(kinds)
+    # raw (6 channels, Foxglove's image and log among them), derived (4, and 4 of Foxglove's for
+    # its 3D panel), scenario, session and calibration (unwrapped and omni) documents
+    assert len(kinds) == 17, sorted(kinds)
     assert sum(schema == "bslam.Calibration" for schema, _ in real_docs) >= 2
     for schema, doc in real_docs:
         assert conforms(schema_dict(schema), doc) is True, schema

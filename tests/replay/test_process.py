@@ -143,6 +143,7 @@ def test_derived_log_channels_validate(small_log: Path, tmp_path: Path) -> None:
     out = tmp_path / "d.mcap"
     doc = process_log(small_log, MethodConfig(n_r=20, n_l=40), out=out)
     counts: dict[str, int] = {}
+    particle_sets = 0
     with out.open("rb") as f:
         reader = make_reader(f)
         for _, channel, message in reader.iter_messages(log_time_order=True):
@@ -153,12 +154,19 @@ def test_derived_log_channels_validate(small_log: Path, tmp_path: Path) -> None:
                 final = {lm["name"]: lm["mean"] for lm in msg["landmarks"]}
             if channel.topic == "/pipeline/particles_fr":
                 assert all(len(s["x"]) == 20 for s in msg["landmarks"])
+            if channel.topic == "/pipeline/particles_fl" and msg["landmarks"]:
+                particle_sets += 1  # a point cloud of the Foxglove channels each
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
     assert counts == {
         "/pipeline/bearings": 2 * len(MOVES),
         "/pipeline/particles_fr": len(MOVES),
         "/pipeline/particles_fl": len(MOVES),
         "/pipeline/estimate": len(MOVES),
+        "/pipeline/map": len(MOVES),
+        "/pipeline/keyframe_poses": len(MOVES),
+        "/pipeline/trajectory": len(MOVES),
+        "/pipeline/tf": len(MOVES),
+        "/pipeline/particles": particle_sets,
     }
     for name, mean in final.items():
         assert mean == pytest.approx(doc["landmarks"][name]["mean"], abs=1e-8)
