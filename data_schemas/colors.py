@@ -33,16 +33,17 @@ def class_label(color: str | None, bands: Sequence[str]) -> str:
     return "-".join(bands) if bands else str(color)
 
 
-def appearance_problem(entry: Mapping[str, Any]) -> str | None:
+def appearance_problem(entry: Mapping[str, Any], *, name_only: bool = False) -> str | None:
     """Why a catalog/scenario landmark entry's ``color``/``bands`` keys are unusable, or None.
 
     A landmark has either ``"color"`` (one colour name) or ``"bands"`` (two or more colour
-    names, top to bottom); the colour names themselves are checked by the schema.
+    names, top to bottom); the colour names themselves are checked by the schema. With
+    ``name_only`` (a session without a camera) it may have neither: it is known by its name.
     """
     has_color, has_bands = "color" in entry, "bands" in entry
     if has_color and has_bands:
         return "give either 'color' (one colour) or 'bands' (colours top to bottom), not both"
-    if not has_color and not has_bands:
+    if not has_color and not has_bands and not name_only:
         return "needs 'color' (one colour) or 'bands' (two or more colours, top to bottom)"
     if has_bands and isinstance(entry["bands"], list):
         return band_problem(entry["bands"])

@@ -67,6 +67,12 @@ _TOPIC_LIST = [
         "bslam.GroundTruth",
         "simulation only: true robot pose x, y, heading (m, rad, world frame)",
     ),
+    Topic(
+        "/truth/robot_pose",
+        "bslam.GroundTruth",
+        "imported logs, evaluation only: the robot's pose by an outside reference (motion "
+        "capture; m, rad, the truth's world frame)",
+    ),
     # Derived logs (`bslam process --out`): the pipeline's stages as channels.
     Topic("/pipeline/bearings", "bslam.Bearings", "derived: landmark bearings of one frame"),
     Topic(

@@ -28,7 +28,8 @@ class LandmarkSpec:
 
     Either ``color`` (a single-colour landmark, optional HSV override ``hsv_lo``/``hsv_hi``) or
     ``bands`` (a coded landmark: two or more colour names, top to bottom, equal heights; then
-    ``color`` is None).
+    ``color`` is None), or neither in a session without a camera (known by its name only: a
+    beacon id, a fiducial, an imported dataset's landmark number).
     """
 
     name: str
@@ -39,7 +40,10 @@ class LandmarkSpec:
 
     @property
     def label(self) -> str:
-        """The landmark's class: ``"red"`` or ``"magenta-yellow"`` (see ``class_label``)."""
+        """The landmark's class: ``"red"`` or ``"magenta-yellow"`` (see ``class_label``); a
+        landmark known by its name only (no colour, no bands) is a class of its own, its name."""
+        if self.color is None and not self.bands:
+            return self.name
         return class_label(self.color, self.bands)
 
 
@@ -82,16 +86,17 @@ class Session:
         Names of the reference pair (L1 -> (0, 0), L2 -> (1, 0) in FL).
     vision_error_rad : float
         Bound eps on the bearing error.
-    calibration : Calibration
-        How image positions map to bearings.
+    calibration : Calibration or None
+        How image positions map to bearings; None in a session without a camera (its bearings
+        come from ``/sensor/bearings``).
     doc : dict
-        The whole JSON document (robot settings, camera source, scenario, versions).
+        The whole JSON document (robot settings, camera source, scenario, provenance, versions).
     """
 
     landmarks: tuple[LandmarkSpec, ...]
     reference: tuple[str, str]
     vision_error_rad: float
-    calibration: Calibration
+    calibration: Calibration | None
     simulated: bool
     doc: dict[str, Any] = field(repr=False, compare=False)
 
@@ -113,18 +118,43 @@ class Session:
         """Catalog names in order."""
         return [lm.name for lm in self.landmarks]
 
+    @property
+    def provenance(self) -> dict[str, Any] | None:
+        """Where an imported session came from (importer, source files' SHA-256), else None."""
+        given: dict[str, Any] | None = self.doc.get("provenance")
+        return given
+
+    def truth_landmarks_m(self) -> dict[str, tuple[float, float]] | None:
+        """Landmark positions an outside reference measured (metres, its world frame), or None.
+
+        For evaluation only: estimation never reads them.
+        """
+        truth = self.doc.get("truth")
+        if truth is None:
+            return None
+        return {lm["name"]: (float(lm["x_m"]), float(lm["y_m"])) for lm in truth["landmarks"]}
+
 
 def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> Session:
     """Validate a session document and build its typed view (raise SchemaError)."""
+    no_camera = "camera" not in doc
     for i, entry in enumerate(doc.get("landmarks") or []):
-        problem = appearance_problem(entry) if isinstance(entry, dict) else None
+        problem = (
+            appearance_problem(entry, name_only=no_camera) if isinstance(entry, dict) else None
+        )
         if problem:
             raise SchemaError(f"{what}: field 'landmarks.{i}': {problem}")
     validate("bslam.Session", doc, what=what)
     ref = doc["reference"]
-    wrong = catalog_problem([lm["name"] for lm in doc["landmarks"]], ref)
+    names = [lm["name"] for lm in doc["landmarks"]]
+    wrong = catalog_problem(names, ref)
     if wrong is not None:
         raise SchemaError(f"{what}: field {wrong[0]!r}: {wrong[1]}")
+    unknown = [
+        lm["name"] for lm in doc.get("truth", {}).get("landmarks", []) if lm["name"] not in names
+    ]
+    if unknown:
+        raise SchemaError(f"{what}: field 'truth.landmarks': {unknown[0]!r} is not in the catalog")
     specs = []
     for lm in doc["landmarks"]:
         hsv = lm.get("hsv")
@@ -141,7 +171,7 @@ def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> 
         landmarks=tuple(specs),
         reference=(ref[0], ref[1]),
         vision_error_rad=math.radians(float(doc["vision_error_deg"])),
-        calibration=calibration_from_dict(doc["camera"]["calibration"]),
+        calibration=None if no_camera else calibration_from_dict(doc["camera"]["calibration"]),
         simulated=bool(doc["simulated"]),
         doc=doc,
     )

@@ -30,7 +30,7 @@ import numpy as np
 import pybase64
 from numpy.typing import NDArray
 
-from data_schemas.errors import EstimationError, ImageError
+from data_schemas.errors import EstimationError, ImageError, MissingMetadataError
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
 from data_schemas.registry import IMAGE_SCHEMA, image_encoding
@@ -174,7 +174,8 @@ class Runner:
         shared = shared_reference_problem(self.session.landmarks, self.session.reference)
         if shared:
             raise EstimationError(f"{log.name}: {shared}")
-        self.extractor = BearingExtractor(self.session.calibration, self.session.landmarks)
+        cal = self.session.calibration
+        self._extractor = None if cal is None else BearingExtractor(cal, self.session.landmarks)
         alike = shared_classes(self.session.landmarks)
         if alike and method.estimator == "paper":
             classes = ", ".join(f"{c} ({', '.join(n)})" for c, n in alike.items())
@@ -190,6 +191,16 @@ class Runner:
         self.all_frames = any(s.wants_all_frames for s in self.sinks)
         self.images = any(s.wants_images for s in self.sinks)
         self.state = _State()
+
+    @property
+    def extractor(self) -> BearingExtractor:
+        """Bearings from frames; a session without a camera has frames to refuse."""
+        if self._extractor is None:
+            raise MissingMetadataError(
+                f"{self.log.name}: frames on /camera/panorama but the session has no camera "
+                "(no calibration); a log without a camera carries /sensor/bearings instead"
+            )
+        return self._extractor
 
     def run(self) -> None:
         info = RunInfo(self.log.name, self.session, self.method, self.truth)

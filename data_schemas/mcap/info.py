@@ -180,18 +180,35 @@ def _session_lines(metadata: dict[str, dict[str, str]]) -> list[str]:
     except BslamError as exc:
         return [f"session: invalid ({exc})"]
     doc = session.doc
-    robot, camera = doc["robot"], doc["camera"]
     cal = session.calibration
-    kind = "simulated" if session.simulated else "recorded"
-    catalog = ", ".join(f"{lm.name} ({lm.label})" for lm in session.landmarks)
-    return [
-        f"session: {kind} with {robot['model']} on {robot['port']}, "
-        f"software {doc['software_version']}, created {_when(doc['created_unix_ns'])}",
-        f"camera: {camera['source']}, {cal.model} {cal.width}x{cal.height}, "
-        f"{camera.get('encoding', '?')}, {camera.get('frame_rate_hz', '?')} Hz",
+    catalog = ", ".join(
+        lm.name if lm.label == lm.name else f"{lm.name} ({lm.label})" for lm in session.landmarks
+    )
+    made = f"software {doc['software_version']}, created {_when(doc['created_unix_ns'])}"
+    source = session.provenance
+    if source is not None:
+        files = ", ".join(f"{f['name']} (sha256 {f['sha256'][:12]}...)" for f in source["files"])
+        lines = [f"session: imported by the {source['kind']} importer from {files}, {made}"]
+    else:
+        robot = doc.get("robot")
+        kind = "simulated" if session.simulated else "recorded"
+        by = f" with {robot['model']} on {robot['port']}" if robot else ""
+        lines = [f"session: {kind}{by}, {made}"]
+    if cal is None:
+        lines.append("camera: none (bearings from /sensor/bearings)")
+    else:
+        camera = doc["camera"]
+        lines.append(
+            f"camera: {camera['source']}, {cal.model} {cal.width}x{cal.height}, "
+            f"{camera.get('encoding', '?')}, {camera.get('frame_rate_hz', '?')} Hz"
+        )
+    lines.append(
         f"landmarks: {catalog}; reference {session.reference[0]}, "
-        f"{session.reference[1]}; vision error {doc['vision_error_deg']:g} deg",
-    ]
+        f"{session.reference[1]}; vision error {doc['vision_error_deg']:g} deg"
+    )
+    if "truth" in doc:
+        lines.append(f"truth: {doc['truth']['source']} (evaluation only)")
+    return lines
 
 
 def summary_lines(s: LogSummary) -> list[str]:

@@ -27,6 +27,7 @@ from data_schemas.errors import BslamError
 #: command name -> "module:attribute". Add a command by adding a line here.
 COMMANDS: dict[str, str] = {
     "info": "replay.cli.info:info",
+    "import": "replay.cli.import_cmd:import_group",
     "recover": "replay.cli.recover:recover",
     "record": "replay.cli.record:record",
     "simulate": "replay.cli.simulate:simulate",

@@ -176,11 +176,12 @@ class RerunSink:
         for i, name in enumerate(s.landmark_names(), start=1):
             classes.append(rr.ClassDescription(info=(i, name, self._rgb[name])))
         log("camera/panorama", rr.AnnotationContext(classes), static=True)
-        mask_format = rr.components.ImageFormat(
-            width=s.calibration.width, height=s.calibration.height, channel_datatype="U8"
-        )
-        masks = rr.SegmentationImage.from_fields(format=mask_format, opacity=0.5)
-        log("camera/panorama/masks", masks, static=True)
+        if s.calibration is not None:
+            mask_format = rr.components.ImageFormat(
+                width=s.calibration.width, height=s.calibration.height, channel_datatype="U8"
+            )
+            masks = rr.SegmentationImage.from_fields(format=mask_format, opacity=0.5)
+            log("camera/panorama/masks", masks, static=True)
         lines = rr.LineStrips2D.from_fields(radii=rr.Radius.ui_points(1.5))
         log("camera/panorama/detections", lines, static=True)
         for name in self._rgb:  # the catalog, then names given by association (red#1, ...)
@@ -271,6 +272,8 @@ class RerunSink:
             buffers = [batch.labels[r].ravel() for r in rows]
             send("camera/panorama/masks", times, rr.SegmentationImage.columns(buffer=buffers))
         for rows, times in batch.timed(batch.detections):
+            if cal is None:  # frames come with a camera only (the runner refuses others)
+                break
             seen = [batch.detections[r] for r in rows]
             strips = rr.LineStrips2D.columns(
                 strips=[s for d in seen for s in detection_segments(cal, d.values())],

@@ -101,7 +101,7 @@ class SummarySink:
             "log": run.log_name,
             "frame": {"origin": s.reference[0], "x_axis": s.reference[1]},
             "method": run.method.summary(s.vision_error_rad),
-            "camera_model": s.calibration.model,
+            "camera_model": None if s.calibration is None else s.calibration.model,
             "simulated": s.simulated,
             "movements": [],
             "landmarks": {},

@@ -91,3 +91,40 @@ def test_catalog_rules_are_the_same_everywhere() -> None:
                 rng=np.random.default_rng(0),
             )
     assert catalog_problem(["A", "B"], ["A", "B"]) is None
+
+
+def _no_camera() -> dict[str, object]:
+    doc = _doc()
+    del doc["camera"], doc["robot"]
+    doc["simulated"] = False
+    doc["landmarks"] = [{"name": "beacon 1"}, {"name": "beacon 2"}, {"name": "beacon 3"}]
+    doc["reference"] = ["beacon 2", "beacon 3"]
+    return doc
+
+
+def test_a_session_without_camera_knows_its_landmarks_by_name() -> None:
+    s = session_from_doc(_no_camera())
+    assert s.calibration is None
+    assert [lm.label for lm in s.landmarks] == ["beacon 1", "beacon 2", "beacon 3"]
+    assert s.provenance is None and s.truth_landmarks_m() is None
+
+
+def test_name_only_landmarks_need_a_session_without_camera() -> None:
+    doc = _doc()
+    doc["landmarks"] = [{"name": "L1"}, {"name": "L2", "color": "green"}]
+    with pytest.raises(SchemaError, match=r"'landmarks.0': needs 'color'"):
+        session_from_doc(doc)
+
+
+def test_provenance_and_truth_are_checked() -> None:
+    entry = {"role": "bearings", "name": "b.csv", "sha256": "ab" * 32, "bytes": 10}
+    prov = {"kind": "csv", "importer_version": 1, "files": [entry]}
+    truth = {"source": "survey", "landmarks": [{"name": "beacon 1", "x_m": 1.0, "y_m": -2.0}]}
+    s = session_from_doc(_no_camera() | {"provenance": prov, "truth": truth})
+    assert s.provenance == prov
+    assert s.truth_landmarks_m() == {"beacon 1": (1.0, -2.0)}
+    unknown = {"source": "survey", "landmarks": [{"name": "beacon 9", "x_m": 0, "y_m": 0}]}
+    with pytest.raises(SchemaError, match="'truth.landmarks': 'beacon 9' is not in the catalog"):
+        session_from_doc(_no_camera() | {"truth": unknown})
+    with pytest.raises(SchemaError, match="importer_version"):
+        session_from_doc(_no_camera() | {"provenance": {"kind": "csv", "files": []}})
