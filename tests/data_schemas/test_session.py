@@ -124,7 +124,7 @@ def test_provenance_and_truth_are_checked() -> None:
     assert s.provenance == prov
     assert s.truth_landmarks_m() == {"beacon 1": (1.0, -2.0)}
     unknown = {"source": "survey", "landmarks": [{"name": "beacon 9", "x_m": 0, "y_m": 0}]}
-    with pytest.raises(SchemaError, match="'truth.landmarks': 'beacon 9' is not in the catalog"):
+    with pytest.raises(SchemaError, match=r"'truth\.landmarks': 'beacon 9' is not in the catalog"):
         session_from_doc(_no_camera() | {"truth": unknown})
     with pytest.raises(SchemaError, match="importer_version"):
         session_from_doc(_no_camera() | {"provenance": {"kind": "csv", "files": []}})

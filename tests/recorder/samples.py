@@ -88,4 +88,5 @@ def sample_messages(t_ns: int, rng: np.random.Generator) -> dict[str, dict[str, 
             "line": 0,
         },
         "/sim/ground_truth": {"timestamp": stamp, "x": 0.1, "y": 0.2, "heading": -1.0},
+        "/truth/robot_pose": {"timestamp": stamp, "x": 1.5, "y": -0.5, "heading": 0.25},
     }

@@ -54,8 +54,9 @@ def test_every_message_validates_and_session_is_simulated(paper_log: Path) -> No
     assert session.doc["simulation"]["seed"] == 11
     for m in msgs:
         validate(TOPICS[m.topic].schema, m.decode(), what=m.topic)
-    # a stop-and-go session has neither a driving robot's odometry poses nor a bearing sensor
-    driving = {"/robot/odometry_pose", "/sensor/bearings"}
+    # a stop-and-go session has neither a driving robot's odometry poses nor a bearing sensor,
+    # nor the outside truth of an imported log
+    driving = {"/robot/odometry_pose", "/sensor/bearings", "/truth/robot_pose"}
     recorded = {t for t in TOPICS if not t.startswith("/pipeline/")} - driving
     assert {m.topic for m in msgs} == recorded
     starts = [m for m in msgs if m.topic == "/robot/movement" and m.decode()["phase"] == "start"]
