@@ -9,7 +9,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
-from urllib.parse import urlsplit
+from urllib.parse import quote, urlsplit
 
 import rerun as rr
 
@@ -35,6 +35,65 @@ class RerunTarget:
 
     kind: Literal["save", "spawn", "connect", "serve"]
     where: str | None = None
+    port: int | None = None
+    """``serve``: the gRPC port (Rerun's default 9876 if None)."""
+
+
+#: Rerun's default ports: its gRPC server and its web viewer.
+DEFAULT_GRPC_PORT = 9876
+DEFAULT_WEB_PORT = 9090
+
+
+@dataclass(frozen=True)
+class ServeAddress:
+    """Where ``--serve`` is reached from other machines.
+
+    Rerun 0.41's servers listen on every interface (its Python API takes no bind address);
+    ``host`` is the name or address a viewer elsewhere uses for this machine.
+    """
+
+    host: str
+    grpc_port: int = DEFAULT_GRPC_PORT
+    web_port: int = DEFAULT_WEB_PORT
+
+    @property
+    def grpc_url(self) -> str:
+        """What a native viewer opens: ``rerun rerun+http://HOST:PORT/proxy``."""
+        return f"rerun+http://{self.host}:{self.grpc_port}/proxy"
+
+    @property
+    def web_url(self) -> str:
+        """The web viewer, told where the recording is served (open it in a browser)."""
+        return f"http://{self.host}:{self.web_port}/?url={quote(self.grpc_url, safe='')}"
+
+
+def check_port_free(port: int, what: str) -> None:
+    """Refuse a port something already listens on (Rerun would fail only in the background).
+
+    Raises
+    ------
+    ViewerError
+        ``port`` is taken (or may not be bound here).
+    """
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        try:
+            probe.bind(("0.0.0.0", port))
+        except OSError as exc:
+            raise ViewerError(
+                f"cannot serve the {what} on port {port} ({exc.strerror or exc}); "
+                "choose another port"
+            ) from None
+
+
+def serve_web_viewer(address: ServeAddress) -> None:
+    """Host Rerun's web viewer on ``address.web_port``, connecting to ``address.grpc_url``."""
+    check_port_free(address.web_port, "web viewer")
+    try:
+        rr.serve_web_viewer(
+            web_port=address.web_port, open_browser=False, connect_to=address.grpc_url
+        )
+    except RuntimeError as exc:
+        raise ViewerError(f"cannot serve the web viewer: {exc}") from None
 
 
 def open_recording(
@@ -60,7 +119,9 @@ def open_recording(
         elif target.kind == "connect":
             rec.connect_grpc(target.where, default_blueprint=blueprint)
         else:
-            url = rec.serve_grpc(default_blueprint=blueprint)
+            port = DEFAULT_GRPC_PORT if target.port is None else target.port
+            check_port_free(port, "recording (gRPC)")
+            url = rec.serve_grpc(grpc_port=port, default_blueprint=blueprint)
     except (RuntimeError, OSError) as exc:
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ViewerError(f"cannot open the Rerun {target.kind} target: {reason}") from None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shlex
 from pathlib import Path
 
 import click
@@ -40,7 +39,7 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool, estimator: str) -> N
     from recorder.sim.scenario import builtin_scenario
     from recorder.sim.simulate import simulate_to_file
     from replay.cli.process import show_skips
-    from replay.cli.recording import run_recording, viewer_command
+    from replay.cli.recording import run_recording, viewing_hints
     from replay.process import result_line
     from replay.records import MethodConfig
     from replay.rerun_out import save_rrd
@@ -88,4 +87,5 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool, estimator: str) -> N
     click.echo(f"  derived log    {derived}")
     click.echo(f"  summary        {summary}")
     click.echo(f"  Rerun          {rrd}")
-    click.echo(f"open the replay with:  {shlex.join([viewer_command(), str(rrd)])}")
+    for line in viewing_hints(rrd):
+        click.echo(line)

@@ -214,3 +214,16 @@ def viewer_command() -> str:
         return "rerun"
     beside = Path(sys.executable).parent / "rerun"
     return str(beside) if beside.exists() else "rerun"
+
+
+def viewing_hints(rrd: Path) -> list[str]:
+    """How to look at the Rerun recording ``rrd``: with a display, and without one."""
+    import shlex
+
+    viewer = viewer_command()
+    return [
+        f"wrote {rrd}; open it with: {shlex.join([viewer, str(rrd)])}",
+        "no display here (a robot, a server)? serve it to a browser: "
+        f"{shlex.join([viewer, '--serve-web', str(rrd)])}, then open http://HOST:9090 "
+        "(HOST: this machine's name)",
+    ]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shlex
 import time
 from pathlib import Path
 
@@ -21,7 +20,28 @@ from replay.cli.process import method_options, show_skips
     metavar="URL",
     help="Stream to a running viewer (e.g. rerun+http://127.0.0.1:9876/proxy).",
 )
-@click.option("--serve", is_flag=True, help="Serve the recording (gRPC + web viewer) until Ctrl-C.")
+@click.option(
+    "--serve",
+    is_flag=True,
+    help="Serve the recording (gRPC + web viewer, on every interface) until Ctrl-C: "
+    "for a machine without a display.",
+)
+@click.option(
+    "--host",
+    metavar="NAME",
+    help="--serve: the name or address other machines reach this one by, put in the printed "
+    "URLs.  [default: this machine's host name]",
+)
+@click.option(
+    "--port",
+    type=click.IntRange(1, 65535),
+    help="--serve: the recording's gRPC port.  [default: 9876]",
+)
+@click.option(
+    "--web-port",
+    type=click.IntRange(1, 65535),
+    help="--serve: the web viewer's HTTP port.  [default: 9090]",
+)
 @click.option("--keyframes-only", is_flag=True, help="Skip the frames between keyframes.")
 @click.option("--force", is_flag=True, help="Replace an existing --save file (never LOG).")
 @click.option(
@@ -37,6 +57,9 @@ def replay(
     spawn: bool,
     connect: str | None,
     serve: bool,
+    host: str | None,
+    port: int | None,
+    web_port: int | None,
     keyframes_only: bool,
     force: bool,
     skip_corrupt: bool,
@@ -56,13 +79,28 @@ def replay(
     LOG is still being written: movements are streamed as their chunks reach the disk, the
     viewer follows the latest movement, and the command ends when LOG is finished (exit 0) or
     idle for --idle-timeout seconds (exit 1).
+
+    On a machine without a display (a robot), --serve and open the printed web viewer URL in a
+    browser elsewhere, or --save and view the file with `rerun --serve-web FILE.rrd`.
     """
+    import socket
+
     from data_schemas.mcap.processable import ProcessableLog
-    from replay.cli.recording import viewer_command
+    from replay.cli.recording import viewing_hints
     from replay.follow import FollowedLog
     from replay.process import open_log, result_line
     from replay.records import MethodConfig
-    from replay.rerun_out import RerunTarget, open_recording, recording_id, replay_log, save_rrd
+    from replay.rerun_out import (
+        DEFAULT_GRPC_PORT,
+        DEFAULT_WEB_PORT,
+        RerunTarget,
+        ServeAddress,
+        open_recording,
+        recording_id,
+        replay_log,
+        save_rrd,
+        serve_web_viewer,
+    )
 
     chosen = [
         k
@@ -73,6 +111,13 @@ def replay(
         raise click.UsageError(f"choose one of --save, --spawn, --connect, --serve (got {chosen})")
     if not chosen:
         save = Path(log.stem + ".rrd")
+    if not serve and (host, port, web_port) != (None, None, None):
+        raise click.UsageError("--host, --port and --web-port go with --serve")
+    address = ServeAddress(
+        host or socket.gethostname(),
+        DEFAULT_GRPC_PORT if port is None else port,
+        DEFAULT_WEB_PORT if web_port is None else web_port,
+    )
     method = MethodConfig(
         prior=prior,
         n_r=n_r,
@@ -82,7 +127,6 @@ def replay(
         turn_prior_deg=turn_prior_deg,
         distance_prior=distance_prior,
     )
-    url = None
     with show_skips():
         # a bad log fails here, before any output exists
         opened: FollowedLog | ProcessableLog = (
@@ -94,8 +138,16 @@ def replay(
             if save:
                 doc = save_rrd(opened, method, save, force=force, images=not keyframes_only)
             else:
-                target = RerunTarget(chosen[0], connect)  # type: ignore[arg-type]
-                rec, url = open_recording(recording_id(opened), target, live=follow)
+                target = RerunTarget(
+                    chosen[0],  # type: ignore[arg-type]
+                    connect,
+                    port=address.grpc_port,
+                )
+                rec, _ = open_recording(recording_id(opened), target, live=follow)
+                if serve:
+                    serve_web_viewer(address)
+                    click.echo(f"web viewer: {address.web_url}")
+                    click.echo(f"native viewer: rerun {address.grpc_url}")
                 try:
                     doc = replay_log(opened, method, rec, images=not keyframes_only, live=follow)
                 finally:
@@ -103,14 +155,12 @@ def replay(
                         rec.disconnect()
     click.echo(f"{log}: {result_line(doc)}")
     if save:
-        click.echo(f"wrote {save}; open it with: {shlex.join([viewer_command(), str(save)])}")
+        for line in viewing_hints(save):
+            click.echo(line)
     if isinstance(opened, FollowedLog) and not serve:
         end_of_follow(opened)
     if serve:
-        import rerun as rr
-
-        rr.serve_web_viewer(connect_to=url, open_browser=False)
-        click.echo(f"serving {url} (web viewer: http://localhost:9090); Ctrl-C to stop")
+        click.echo(f"serving until Ctrl-C: {address.web_url}")
         try:
             while True:
                 time.sleep(1.0)
