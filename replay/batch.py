@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import LogError
+from data_schemas.mcap.window import LogWindow
 from data_schemas.outputs import OutputGuard
 from replay.records import MethodConfig
 
@@ -35,6 +36,7 @@ class LogJob:
     method: MethodConfig
     force: bool = False
     skip_corrupt: bool = False
+    window: LogWindow | None = None
 
 
 def expand_logs(args: Sequence[str]) -> list[Path]:
@@ -72,6 +74,7 @@ def plan_jobs(
     *,
     force: bool = False,
     skip_corrupt: bool = False,
+    window: LogWindow | None = None,
 ) -> list[LogJob]:
     """One job per log. One log: ``out``/``summary`` are files; many: folders (created).
 
@@ -79,7 +82,7 @@ def plan_jobs(
     none may be a log, exist (without ``force``), or be shared by two logs.
     """
     if len(logs) == 1:
-        jobs = [LogJob(logs[0], out, summary, method, force, skip_corrupt)]
+        jobs = [LogJob(logs[0], out, summary, method, force, skip_corrupt, window)]
     else:
         for folder in (out, summary):
             if folder is not None:
@@ -94,6 +97,7 @@ def plan_jobs(
                 method,
                 force,
                 skip_corrupt,
+                window,
             )
             for log in logs
         ]
@@ -116,4 +120,5 @@ def process_job(job: LogJob) -> dict[str, Any]:
         summary=job.summary,
         force=job.force,
         skip_corrupt=job.skip_corrupt,
+        window=job.window,
     )

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.mcap.processable import ProcessableLog
+from data_schemas.mcap.window import LogWindow, WindowedLog, WindowError
 from data_schemas.outputs import OutputGuard
 from replay.records import MethodConfig, Sink
 from replay.sinks.summary import SummarySink
@@ -53,6 +54,7 @@ def process_log(
     extra_sinks: tuple[Sink, ...] = (),
     force: bool = False,
     skip_corrupt: bool = False,
+    window: LogWindow | None = None,
 ) -> dict[str, Any]:
     """Process one log; return its summary document.
 
@@ -72,12 +74,16 @@ def process_log(
         Replace existing outputs (never the log itself).
     skip_corrupt : bool
         Process a corrupt log without its damaged chunks (warned about) instead of refusing it.
+    window : LogWindow, optional
+        Only this part of a finished log (``--from`` / ``--to``).
 
     Raises
     ------
     OutputError
         An output is the log (or a link to it), exists without ``force``, or cannot be written;
         checked before anything is read.
+    WindowError
+        ``window`` names a movement the log does not have, or ``log`` is being followed.
     """
     source = Path(log) if isinstance(log, str | os.PathLike) else log.path
     guard = OutputGuard([source], force=force)
@@ -87,19 +93,40 @@ def process_log(
     summary_sink = SummarySink()
     sinks: list[Sink] = [summary_sink, *extra_sinks]
     with contextlib.ExitStack() as stack:
-        opened = (
+        opened: MessageLog = (
             stack.enter_context(open_log(log, skip_corrupt=skip_corrupt))
             if isinstance(log, str | os.PathLike)
             else log
         )
+        if window:
+            opened = windowed(opened, window)
         if out is not None:
             from replay.sinks.derived import DerivedLogSink  # the MCAP writer only when asked
 
             sinks.append(DerivedLogSink(stack.enter_context(guard.staged(out))))
         run_log(opened, method, sinks)
+    if window:
+        summary_sink.document["window"] = {
+            k: str(b) for k, b in (("from", window.start), ("to", window.end)) if b is not None
+        }
     if summary is not None:
         write_json(summary, summary_sink.document, guard)
     return summary_sink.document
+
+
+def windowed(log: MessageLog, window: LogWindow) -> WindowedLog:
+    """``log`` cut to ``window``.
+
+    Raises
+    ------
+    WindowError
+        ``log`` is not a finished log opened whole, or ``window`` names a movement it lacks.
+    """
+    if isinstance(log, WindowedLog):
+        log = log.log
+    if not isinstance(log, ProcessableLog):
+        raise WindowError(f"{log.name}: --from/--to take a finished log, not one being followed")
+    return WindowedLog(log, window)
 
 
 def result_line(doc: dict[str, Any]) -> str:

@@ -67,6 +67,23 @@ class MonotonicClock(Protocol):
         ...
 
 
+class SettableClock:
+    """A clock that reads whatever time it was last set to: messages written at given log times
+    (a derived log, a part of a log)."""
+
+    def __init__(self) -> None:
+        self.t_ns = 0
+
+    def monotonic_ns(self) -> int:
+        return self.t_ns
+
+    def wall_ns(self) -> int:
+        return self.t_ns
+
+    def sleep(self, seconds: float) -> None:
+        """Nothing waits: the time is set, not lived."""
+
+
 def software_version() -> str:
     """Installed version of the ``bearing-slam`` distribution (``0+unknown`` from a checkout)."""
     try:

@@ -28,6 +28,9 @@ from data_schemas.errors import BslamError
 COMMANDS: dict[str, str] = {
     "info": "replay.cli.info:info",
     "import": "replay.cli.import_cmd:import_group",
+    "cat": "replay.cli.cat:cat",
+    "split": "replay.cli.parts:split",
+    "merge": "replay.cli.parts:merge",
     "recover": "replay.cli.recover:recover",
     "record": "replay.cli.record:record",
     "simulate": "replay.cli.simulate:simulate",

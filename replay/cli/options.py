@@ -27,3 +27,37 @@ class FiniteFloat(click.FloatRange):
 
 #: Seeds of numpy's random generators: integers >= 0.
 SEED = click.IntRange(min=0)
+
+
+class WindowBound(click.ParamType):
+    """``--from`` / ``--to``: ``12.5s`` (seconds from the log's start) or ``m3`` (movement 3)."""
+
+    name = "Ns|mK"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        from data_schemas.mcap.window import Bound, WindowError, parse_bound
+
+        if isinstance(value, Bound):
+            return value
+        try:
+            return parse_bound(str(value))
+        except WindowError as exc:
+            self.fail(str(exc), param, ctx)
+
+
+def window_options(fn: click.decorators.FC) -> click.decorators.FC:
+    """``--from`` and ``--to`` (passed as ``start`` and ``end``, Bound or None)."""
+    fn = click.option(
+        "--to",
+        "end",
+        type=WindowBound(),
+        help="Stop after this point: seconds from the log's start ('60s') or the end of a "
+        "movement ('m5', included).",
+    )(fn)
+    return click.option(
+        "--from",
+        "start",
+        type=WindowBound(),
+        help="Start at this point: seconds from the log's start ('10s') or the start of a "
+        "movement ('m2', included).",
+    )(fn)

@@ -12,10 +12,11 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from replay.cli.follow import end_of_follow, follow_options
-from replay.cli.options import SEED, FiniteFloat
+from replay.cli.options import SEED, FiniteFloat, window_options
 from replay.experiments.protocol import DEFAULT_DISTANCE_PRIOR, PRIORS
 
 if TYPE_CHECKING:
+    from data_schemas.mcap.window import Bound
     from replay.batch import LogJob
     from replay.records import MethodConfig
 
@@ -163,6 +164,7 @@ def show_skips() -> Iterator[None]:
     is_flag=True,
     help="Process a corrupt log without its damaged chunks (warned) instead of refusing it.",
 )
+@window_options
 @follow_options
 def process(
     logs: tuple[str, ...],
@@ -179,6 +181,8 @@ def process(
     scheduler: str | None,
     force: bool,
     skip_corrupt: bool,
+    start: Bound | None,
+    end: Bound | None,
     follow: bool,
     idle_timeout: float,
 ) -> None:
@@ -194,7 +198,11 @@ def process(
     With --follow, LOG (one file) is still being written: each movement is processed once its
     whole chunk is on disk, a compact view of the map is updated in place on stderr, and the
     command ends when LOG is finished (exit 0) or idle for --idle-timeout seconds (exit 1).
+
+    --from and --to keep a part of each log: seconds from its start ('10s') or movements
+    ('--from m2 --to m4': movements 2 to 4 whole).
     """
+    from data_schemas.mcap.window import LogWindow
     from replay.batch import expand_logs, plan_jobs
     from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
@@ -208,6 +216,9 @@ def process(
         turn_prior_deg=turn_prior_deg,
         distance_prior=distance_prior,
     )
+    window = LogWindow(start, end)
+    if follow and window:
+        raise click.UsageError("--from/--to take a finished log, not --follow")
     if follow:
         _process_followed(logs, out, summary, method, idle_timeout, scheduler, force)
         return
@@ -215,14 +226,22 @@ def process(
     if len(paths) == 1 and scheduler is None:
         with show_skips():
             doc = process_log(
-                paths[0], method, out=out, summary=summary, force=force, skip_corrupt=skip_corrupt
+                paths[0],
+                method,
+                out=out,
+                summary=summary,
+                force=force,
+                skip_corrupt=skip_corrupt,
+                window=window,
             )
         if out is None and summary is None:
             click.echo(dumps(doc))
         else:
             click.echo(f"{paths[0]}: {result_line(doc)}")
         return
-    jobs = plan_jobs(paths, out, summary, method, force=force, skip_corrupt=skip_corrupt)
+    jobs = plan_jobs(
+        paths, out, summary, method, force=force, skip_corrupt=skip_corrupt, window=window
+    )
     _process_many(jobs, workers, scheduler)
 
 

@@ -4,11 +4,16 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from replay.cli.follow import end_of_follow, follow_options
+from replay.cli.options import window_options
 from replay.cli.process import method_options, show_skips
+
+if TYPE_CHECKING:
+    from data_schemas.mcap.window import Bound
 
 
 @click.command("replay")
@@ -49,6 +54,7 @@ from replay.cli.process import method_options, show_skips
     is_flag=True,
     help="Replay a corrupt log without its damaged chunks (warned) instead of refusing it.",
 )
+@window_options
 @method_options
 @follow_options
 def replay(
@@ -63,6 +69,8 @@ def replay(
     keyframes_only: bool,
     force: bool,
     skip_corrupt: bool,
+    start: Bound | None,
+    end: Bound | None,
     estimator: str,
     turn_prior_deg: float | None,
     distance_prior: float | None,
@@ -86,9 +94,10 @@ def replay(
     import socket
 
     from data_schemas.mcap.processable import ProcessableLog
+    from data_schemas.mcap.window import LogWindow
     from replay.cli.recording import viewing_hints
     from replay.follow import FollowedLog
-    from replay.process import open_log, result_line
+    from replay.process import open_log, result_line, windowed
     from replay.records import MethodConfig
     from replay.rerun_out import (
         DEFAULT_GRPC_PORT,
@@ -111,6 +120,9 @@ def replay(
         raise click.UsageError(f"choose one of --save, --spawn, --connect, --serve (got {chosen})")
     if not chosen:
         save = Path(log.stem + ".rrd")
+    window = LogWindow(start, end)
+    if follow and window:
+        raise click.UsageError("--from/--to take a finished log, not --follow")
     if not serve and (host, port, web_port) != (None, None, None):
         raise click.UsageError("--host, --port and --web-port go with --serve")
     address = ServeAddress(
@@ -135,8 +147,9 @@ def replay(
             else open_log(log, skip_corrupt=skip_corrupt)
         )
         with opened:
+            source = windowed(opened, window) if window else opened
             if save:
-                doc = save_rrd(opened, method, save, force=force, images=not keyframes_only)
+                doc = save_rrd(source, method, save, force=force, images=not keyframes_only)
             else:
                 target = RerunTarget(
                     chosen[0],  # type: ignore[arg-type]
@@ -149,7 +162,7 @@ def replay(
                     click.echo(f"web viewer: {address.web_url}")
                     click.echo(f"native viewer: rerun {address.grpc_url}")
                 try:
-                    doc = replay_log(opened, method, rec, images=not keyframes_only, live=follow)
+                    doc = replay_log(source, method, rec, images=not keyframes_only, live=follow)
                 finally:
                     if not serve:
                         rec.disconnect()

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from data_schemas.mcap.writer import LogWriter
+from data_schemas.mcap.writer import LogWriter, SettableClock
 from data_schemas.registry import schema_dict
 from data_schemas.stamps import Stamp, stamp_from_ns
 from pipeline.bearings.detection import Detection
@@ -38,22 +38,6 @@ from replay.records import (
 )
 from replay.sinks import foxglove
 from replay.sinks.palette import ELLIPSE_RGB, landmark_rgb
-
-
-class SettableClock:
-    """A :class:`recorder.clock.Clock` that reads whatever time it was last set to."""
-
-    def __init__(self) -> None:
-        self.t_ns = 0
-
-    def monotonic_ns(self) -> int:
-        return self.t_ns
-
-    def wall_ns(self) -> int:
-        return self.t_ns
-
-    def sleep(self, seconds: float) -> None:
-        """Nothing waits in a derived log."""
 
 
 def _cov_xy(cov: NDArray[np.floating]) -> dict[str, float]:
