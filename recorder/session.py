@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from data_schemas.calibration import Calibration, calibration_from_dict
+from data_schemas.calibration import Calibration, calibration_from_dict, pinhole_from_camera_info
 from data_schemas.codec import validate
 from data_schemas.errors import BslamError, CalibrationError, SchemaError
 from data_schemas.mcap.writer import software_version
@@ -123,13 +123,62 @@ def _read_json(path: str | os.PathLike[str], what: str) -> Any:
 
 
 def load_calibration_file(path: str | os.PathLike[str]) -> Calibration:
-    """Read a camera calibration JSON file (``bslam.Calibration``); raise CalibrationError."""
+    """Read a camera calibration file; raise CalibrationError.
+
+    A JSON file with a ``model`` key is a ``bslam.Calibration``. Any other JSON, YAML or XML
+    file is a pinhole camera's calibration as ROS's ``camera_info`` / ``camera_calibration``
+    or OpenCV's ``FileStorage`` write it (:func:`~data_schemas.calibration.
+    pinhole_from_camera_info`; an optional ``offset_deg`` gives the camera's mounted yaw).
+    """
+    name = os.fspath(path)
+    if name.lower().endswith((".yaml", ".yml", ".xml")):
+        return pinhole_from_camera_info(_read_file_storage(name))
     doc = _read_json(path, "calibration")
+    if isinstance(doc, dict) and "model" not in doc:
+        return pinhole_from_camera_info(doc)
     try:
-        validate("bslam.Calibration", doc, what=f"calibration file {os.fspath(path)}")
+        validate("bslam.Calibration", doc, what=f"calibration file {name}")
     except SchemaError as exc:
         raise CalibrationError(str(exc)) from None
     return calibration_from_dict(doc)
+
+
+def _read_file_storage(path: str) -> dict[str, Any]:
+    """The top-level keys of a YAML/XML file read by OpenCV's ``FileStorage`` (matrices as
+    nested lists); raise CalibrationError."""
+    import cv2
+
+    if not os.path.isfile(path):
+        raise CalibrationError(f"cannot read calibration file {path}: no such file")
+    try:
+        storage = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError):  # OpenCV's parser raises either on malformed text
+        storage = None
+    if storage is None or not storage.isOpened():
+        raise CalibrationError(
+            f"calibration file {path} is not YAML/XML that OpenCV's FileStorage can read"
+        )
+    try:
+        names = storage.root().keys()
+        return {key: _node_value(storage.getNode(key)) for key in names}
+    finally:
+        storage.release()
+
+
+def _node_value(node: Any) -> Any:
+    """A FileStorage node as plain Python: a matrix as nested lists, maps, sequences, scalars."""
+    if node.isMap():
+        names = node.keys()
+        if "dt" in names and "data" in names:  # an !!opencv-matrix
+            return node.mat().tolist()
+        return {key: _node_value(node.getNode(key)) for key in names}
+    if node.isSeq():
+        return [_node_value(node.at(i)) for i in range(node.size())]
+    if node.isString():
+        return node.string()
+    if node.isInt() or node.isReal():
+        return node.real()
+    return None
 
 
 @dataclass(frozen=True)

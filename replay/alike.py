@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from data_schemas.session import Session, shared_classes
 from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.association.final import FinalDetection
-from pipeline.bearings import Detection
+from pipeline.bearings import Detection, camera_view_rad
 from pipeline.estimators import Estimator
 from pipeline.joint.geometry import KeyframePose
 from pipeline.slam import MovementObservation, MovementResult
@@ -42,6 +42,7 @@ class AlikeLandmarks:
             {label: len(names) for label, names in self.classes.items()},
             session.reference,
             vision_error_rad=session.vision_error_rad,
+            field_of_view_rad=camera_view_rad(session.calibration),
         )
         #: every keyframe's detections per shared class: (movement, end) -> label -> bearings
         self.keyframe_blobs: dict[tuple[int, int], dict[str, list[float]]] = {}

@@ -66,6 +66,38 @@ def predict_bearings(
     return np.asarray(bearing, np.float64), np.sqrt(np.maximum(var, 0.0))
 
 
+def outside_view(
+    bearing_rad: NDArray[np.float64],
+    std_rad: NDArray[np.float64],
+    field_of_view_rad: tuple[float, float] | None,
+    *,
+    n_std: float,
+) -> NDArray[np.bool_]:
+    """Which predicted bearings lie outside a camera's field of view by more than ``n_std``
+    standard deviations (such a landmark is not visible there, not missed).
+
+    Parameters
+    ----------
+    bearing_rad, std_rad : (n,) float
+        Predicted bearings (robot frame) and their standard deviations, rad.
+    field_of_view_rad : (lo, hi) or None
+        Bearings of the view's right and left edges, rad (``hi - lo`` its width); None: a
+        panoramic camera, everything is in view.
+    n_std : float
+        Margin, in standard deviations of each prediction.
+    """
+    b = np.asarray(bearing_rad, np.float64).reshape(-1)
+    if field_of_view_rad is None:
+        return np.zeros(b.shape, np.bool_)
+    lo, hi = field_of_view_rad
+    margin = n_std * np.asarray(std_rad, np.float64).reshape(-1)
+    # angle past the left edge and before the right edge, measured away from the view's middle
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    off = np.abs(wrap_rad(b - centre)) - half
+    out: NDArray[np.bool_] = off > margin
+    return out
+
+
 def predict_ranges(
     origin_fl: NDArray[np.float64],
     points_fl: NDArray[np.float64],

@@ -79,7 +79,12 @@ from pipeline.association.hypotheses import (
     fit,
 )
 from pipeline.association.match import Matched, match_movement, place_left_out
-from pipeline.association.predict import MAX_PRED_STD_EPS, predict_bearings, predict_ranges
+from pipeline.association.predict import (
+    MAX_PRED_STD_EPS,
+    outside_view,
+    predict_bearings,
+    predict_ranges,
+)
 from pipeline.association.support import Outcome, Support
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
@@ -228,11 +233,21 @@ class Associator:
         The reference pair, at (0, 0) and (1, 0) in FL.
     vision_error_rad : float
         The bearing error bound eps.
+    field_of_view_rad : (lo, hi) or None
+        A pinhole camera's view, bearings of its right and left edges (rad, robot frame): a
+        landmark predicted outside it (beyond its gate) is not visible there, neither seen nor
+        missed. None: a panoramic camera.
     """
 
     def __init__(
-        self, classes: Mapping[str, int], reference: tuple[str, str], *, vision_error_rad: float
+        self,
+        classes: Mapping[str, int],
+        reference: tuple[str, str],
+        *,
+        vision_error_rad: float,
+        field_of_view_rad: tuple[float, float] | None = None,
     ) -> None:
+        self.field_of_view_rad = field_of_view_rad
         self.capacity = dict(classes)
         self.reference = reference
         self.eps_rad = float(vision_error_rad)
@@ -774,6 +789,10 @@ class Associator:
             bearing_var_rad=2.0 * self.sigma_rad**2,
         )
 
+    def _outside(self, pred: NDArray[np.float64], std: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Predictions outside the camera's view by more than their gate."""
+        return outside_view(pred, std, self.field_of_view_rad, n_std=math.sqrt(GATE_CHI2))
+
     def _class(
         self,
         label: str,
@@ -802,7 +821,12 @@ class Associator:
                     f"predicted bearing too uncertain to associate (std {_deg(float(std[k]))})"
                 )
                 out.outcomes.setdefault(known[k][0], []).append("vague")
-            sharp = np.flatnonzero(~vague)
+            away = self._outside(pred, std)
+            for k in np.flatnonzero(away & ~vague):
+                out.not_visible[f"{known[k][0]}@{where}"] = (
+                    f"predicted at {_deg(float(pred[k]))}, outside the camera's field of view"
+                )
+            sharp = np.flatnonzero(~vague & ~away)
             pred, std = pred[sharp], std[sharp]
             usable = [known[i] for i in sharp]
             range_fl, range_std_fl = self._ranges(usable, origins[end], pos_var, mapped)
@@ -884,9 +908,13 @@ class Associator:
             d2 = (wrap_rad(dets[end][cand][None, :] - pred[:, None]) / std[:, None]) ** 2
             inside = d2 <= GATE_CHI2
             used[end].update(cand[j] for j in np.flatnonzero(inside.any(axis=0)))
+            away = self._outside(pred, std)
             grown: list[Hypothesis] = []
             for i, h in enumerate(hyps):
                 hits = np.flatnonzero(inside[i])
+                if hits.size == 0 and away[i]:  # out of view: neither seen nor missed
+                    grown.append(h)
+                    continue
                 if hits.size == 0:
                     h.misses += 1
                     if h.misses < MAX_MISSES:
@@ -1083,8 +1111,9 @@ class Associator:
             0.0,
         )
         seen = predicted = 0
+        away = self._outside(pred, std)
         for i, key in enumerate(keys):
-            if std[i] > MAX_PRED_STD_EPS * self.eps_rad:
+            if std[i] > MAX_PRED_STD_EPS * self.eps_rad or away[i]:
                 continue
             predicted += 1
             det = self._seen_at[key].get(h.label, np.zeros(0))

@@ -1,5 +1,5 @@
-"""Bearing extraction: find landmarks by colour or band code in panoramic frames, measure their
-bearings.
+"""Bearing extraction: find landmarks by colour or band code in frames of a panoramic or pinhole
+camera, measure their bearings.
 
 Pure (arrays in, arrays out). See ``docs/bearings.md`` for colour classes, calibration models,
 accuracy and speed.
@@ -17,6 +17,7 @@ from pipeline.bearings.color_classes import (
 from pipeline.bearings.decode import decode_frame
 from pipeline.bearings.detection import ClassSightings, Detection
 from pipeline.bearings.extractor import BearingExtractor, check_image
+from pipeline.bearings.pinhole import camera_view_rad, pixel_bearings
 
 __all__ = [
     "DEFAULT_HSV",
@@ -27,8 +28,10 @@ __all__ = [
     "HsvBox",
     "LandmarkCatalogError",
     "LandmarkClass",
+    "camera_view_rad",
     "check_image",
     "decode_frame",
     "hsv_box_for",
     "landmark_classes",
+    "pixel_bearings",
 ]

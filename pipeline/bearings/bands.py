@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import TWO_PI, wrap_rad
 from pipeline.bearings.blobs import Blob
-from pipeline.bearings.layout import Layout, OmniLayout
+from pipeline.bearings.layout import Layout, OmniLayout, PinholeLayout, PixelLayout
 
 Run = tuple[int, int, int]  # colour label (1..), first row, row past the last
 
@@ -110,7 +110,7 @@ class BandDecoder:
             if 0 not in (h, a, b) and len({h, a, b}) == 3:
                 self._between[h, a, b] = _hue_between(self._hues[h], self._hues[a], self._hues[b])
         n = layout.n_bins
-        if isinstance(layout, OmniLayout):
+        if isinstance(layout, PixelLayout):
             centre = -math.pi + (np.arange(n) + 0.5) * (TWO_PI / n)
             self._cos, self._sin = np.cos(centre), np.sin(centre)
             self._omni = _OmniRows(layout)
@@ -124,7 +124,7 @@ class BandDecoder:
         landmarks meet side by side, a column blends their colours (magenta beside cyan looks
         blue), which could read as another code.
         """
-        if isinstance(self.layout, OmniLayout):
+        if isinstance(self.layout, PixelLayout):
             bins, labels, counts = self._omni.grid(labels_region)
         else:
             bins = np.flatnonzero(labels_region.any(axis=0))
@@ -335,21 +335,15 @@ def _hue_between(h: float, a: float, b: float) -> bool:
 
 
 class _OmniRows:
-    """Ring pixels of an omni layout as (row, sector) cells: row 0 at ``r_max`` (the top)."""
+    """Pixels of a per-pixel layout as (row, sector) cells, row 0 the highest elevation (omni:
+    rings one pixel wide from ``r_max`` in; pinhole: image rows)."""
 
-    def __init__(self, layout: OmniLayout) -> None:
-        cal = layout.calibration
-        rows, cols = layout.crop
-        y0, x0 = rows.start or 0, cols.start or 0
+    def __init__(self, layout: OmniLayout | PinholeLayout) -> None:
         inside = np.flatnonzero(layout.ring.ravel())
-        w = layout.ring.shape[1]
-        yc = inside // w + y0 + 0.5
-        xc = inside % w + x0 + 0.5
-        radius = np.hypot(xc - cal.cx, yc - cal.cy)
-        self.n_rows = max(1, math.ceil(cal.r_max - cal.r_min) + 1)
+        self.n_rows = layout.n_rows
         self.n_bins = layout.n_bins
         self.pixel = inside
-        self.row = np.clip(np.floor(cal.r_max - radius), 0, self.n_rows - 1).astype(np.intp)
+        self.row = np.asarray(layout.pixel_row).ravel()[inside].astype(np.intp)
         self.bin = layout.pixel_bin.ravel()[inside].astype(np.intp)
         self.pool = layout.gap_bins // 2  # holes filled from this many sectors on each side
 

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
-from pipeline.bearings.layout import Layout, OmniLayout, UnwrappedLayout
+from pipeline.bearings.layout import Layout, PixelLayout, UnwrappedLayout
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,8 @@ class Profile:
 def profile_of_mask(mask: NDArray[np.uint8], value: int, layout: Layout) -> Profile:
     """Angular profile of ``mask`` (crop-sized for omni; pixels are 0 or ``value``).
 
-    Unwrapped: column sums. Omni: the nonzero pixels' sectors from the precomputed table.
+    Unwrapped: column sums. Omni, pinhole: the nonzero pixels' sectors from the precomputed
+    table.
     """
     if isinstance(layout, UnwrappedLayout):
         sums = cv2.reduce(mask, 0, cv2.REDUCE_SUM, dtype=cv2.CV_32S)
@@ -55,7 +56,7 @@ def profile_of_mask(mask: NDArray[np.uint8], value: int, layout: Layout) -> Prof
     return _omni_profile(layout, xy[:, 1], xy[:, 0])
 
 
-def _omni_profile(layout: OmniLayout, ys: NDArray[np.intp], xs: NDArray[np.intp]) -> Profile:
+def _omni_profile(layout: PixelLayout, ys: NDArray[np.intp], xs: NDArray[np.intp]) -> Profile:
     """Angular profile of the ring pixels at rows ``ys``, columns ``xs`` (crop coordinates)."""
     bins = layout.pixel_bin[ys, xs]
     n = layout.n_bins

@@ -1,4 +1,4 @@
-"""Bearings of catalog landmarks in panoramic frames (unwrapped or omni calibration).
+"""Bearings of catalog landmarks in frames of an unwrapped, omni or pinhole calibration.
 
 Landmarks are found by class: a colour (blobs of its colour class) or a band code (stacks of
 band colours read along columns or rays, :mod:`pipeline.bearings.bands`). Every blob of a class
@@ -31,7 +31,7 @@ from pipeline.bearings.blobs import (
 from pipeline.bearings.classify import ClassBit, ColorClassifier
 from pipeline.bearings.color_classes import HsvBox, LandmarkCatalogError, landmark_classes
 from pipeline.bearings.detection import ClassSightings, Detection, detection_of
-from pipeline.bearings.layout import OmniLayout, make_layout
+from pipeline.bearings.layout import OmniLayout, PinholeLayout, PixelLayout, make_layout
 
 #: Default ``min_pixels``: a blob must be at least a 2 x 2 pixel patch, whatever the image size.
 #: A landmark far away is a sliver a pixel or two wide and a few rows tall at any resolution,
@@ -72,7 +72,7 @@ class BearingExtractor:
 
     Parameters
     ----------
-    calibration : UnwrappedCalibration or OmniCalibration
+    calibration : UnwrappedCalibration, OmniCalibration or PinholeCalibration
         Maps image positions to bearings; frames must have its size.
     catalog : sequence of LandmarkSpec
         Landmarks (unique names): a colour name of ``data_schemas.colors`` (optional HSV
@@ -179,6 +179,15 @@ class BearingExtractor:
                 results.append(self.detections(self._sightings([p[rows] for p in planes])))
         return results
 
+    @property
+    def field_of_view_rad(self) -> tuple[float, float] | None:
+        """Bearings (rad, robot frame) of the right and left edges of a pinhole camera's view,
+        ``(lo, hi)`` (a bearing ``b`` is in view when ``wrap(b - lo) <= hi - lo``); None for a
+        panoramic camera."""
+        if isinstance(self._layout, PinholeLayout):
+            return self._layout.field_of_view_rad
+        return None
+
     def masks(self, image_bgr: NDArray[np.uint8]) -> dict[str, NDArray[np.bool_]]:
         """Per landmark, the (H, W) boolean mask of its class's colours (for display)."""
         image = check_image(image_bgr, self.calibration)
@@ -197,7 +206,7 @@ class BearingExtractor:
         return self._classifier.slots[self._boxes.index(box)]
 
     def _crop(self) -> tuple[slice, slice]:
-        if isinstance(self._layout, OmniLayout):
+        if isinstance(self._layout, PixelLayout):
             return self._layout.crop
         return (slice(None), slice(None))
 

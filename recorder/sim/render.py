@@ -1,7 +1,7 @@
 """Render simulated panoramic frames of a :class:`~recorder.sim.world.SimWorld`.
 
 :func:`render_panorama` draws what the robot's panoramic camera sees from its true pose, for
-both camera models of :mod:`data_schemas.calibration`:
+the camera models of :mod:`data_schemas.calibration`:
 
 * ``unwrapped``: each landmark is a vertical bar centred on the column of its (noisy) bearing,
   spanning its angular width; its top and bottom are the cylinder's top and foot seen from a
@@ -10,6 +10,11 @@ both camera models of :mod:`data_schemas.calibration`:
 * ``omni``: each landmark is a wedge of the ring between ``r_min`` and ``r_max``; radius maps
   linearly to elevation (``r_min`` = lowest). Inside ``r_min`` is the dark robot body, outside
   ``r_max`` black.
+* ``pinhole``: a level camera; every pixel's ray (through the lens distortion, inverted by
+  :mod:`recorder.sim.lens`) has a bearing and an elevation, and each landmark covers the pixels
+  whose bearing lies within its angular width and whose elevation lies between its foot and
+  top, with the same anti-aliasing, the kernel scaled by the local bearing and elevation step
+  of one pixel. Landmarks outside the field of view are not drawn.
 
 A coded landmark's bands (equal heights on the cylinder, top to bottom) are painted one above
 the other, each at the elevations of its heights: top band at the top rows (unwrapped), at the
@@ -50,8 +55,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import TWO_PI, wrap_rad
-from data_schemas.calibration import Calibration, OmniCalibration, UnwrappedCalibration
+from data_schemas.calibration import (
+    Calibration,
+    OmniCalibration,
+    PinholeCalibration,
+    UnwrappedCalibration,
+)
 from data_schemas.colors import NOMINAL_BGR
+from recorder.sim.lens import rays_of_pixels
 from recorder.sim.world import Pose, SimWorld
 
 #: Height of the camera's optical centre above the floor, m.
@@ -176,7 +187,7 @@ def render_panorama(
         True robot pose, world frame (m, m, rad).
     world : SimWorld
         Arena and landmarks.
-    calibration : UnwrappedCalibration or OmniCalibration
+    calibration : UnwrappedCalibration, OmniCalibration or PinholeCalibration
         Camera model and image size.
     rng : numpy.random.Generator
         Source of bearing noise, lighting and pixel noise.
@@ -207,6 +218,14 @@ def render_panorama(
     elev_top = np.arctan2(heights - CAMERA_HEIGHT_M, surface_m)
     elev_bot = np.arctan2(-CAMERA_HEIGHT_M, surface_m)
     in_view = (elev_top > ELEVATION_MIN_RAD) & (elev_bot < ELEVATION_MAX_RAD) & (half_rad > 0)
+    if isinstance(tables, _PinholeTables):
+        rel = np.abs(wrap_rad(drawn_rad - tables.offset_rad))
+        in_view = (
+            (elev_top > tables.elevation_lo)
+            & (elev_bot < tables.elevation_hi)
+            & (half_rad > 0)
+            & (rel - half_rad < tables.half_view_rad)
+        )
     for i in np.argsort(-range_m):
         if not in_view[i]:
             continue
@@ -221,6 +240,9 @@ def render_panorama(
             bearing, half = float(drawn_rad[i]), float(half_rad[i])
             if isinstance(calibration, UnwrappedCalibration):
                 _paint_bar(image, calibration, bearing, half, lo, hi, color)
+            elif isinstance(tables, _PinholeTables):
+                lo, hi = float(elev[k + 1]), float(elev[k])
+                _paint_rect(image, tables, bearing, half, lo, hi, color)
             else:
                 assert isinstance(tables, _OmniTables)
                 _paint_wedge(image, tables, bearing, half, lo, hi, color)
@@ -383,6 +405,34 @@ def _paint_wedge(
     flat[pix] = vals
 
 
+def _paint_rect(
+    image: NDArray[np.float32],
+    tables: _PinholeTables,
+    bearing_rad: float,
+    half_rad: float,
+    elev_lo_rad: float,
+    elev_hi_rad: float,
+    color: NDArray[np.float32],
+) -> None:
+    """Alpha-blend the pixels whose rays fall in a bearing x elevation box (pinhole, in place)."""
+    rel = float(wrap_rad(bearing_rad - tables.offset_rad))
+    b_lo, b_hi = rel - half_rad, rel + half_rad
+    cols = np.flatnonzero((tables.col_max >= b_lo) & (tables.col_min <= b_hi))
+    rows = np.flatnonzero((tables.row_max >= elev_lo_rad) & (tables.row_min <= elev_hi_rad))
+    if cols.size == 0 or rows.size == 0:
+        return
+    block_at = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+    b = tables.rel_bearing[block_at]
+    db = tables.bearing_step[block_at]
+    e = tables.elevation[block_at]
+    de = tables.elevation_step[block_at]
+    cover = _tent_cdf((b_hi - b) / db) - _tent_cdf((b_lo - b) / db)
+    cover *= _tent_cdf((elev_hi_rad - e) / de) - _tent_cdf((elev_lo_rad - e) / de)
+    alpha = cover.astype(np.float32)[..., None]
+    block = image[block_at]
+    block += alpha * (color - block)
+
+
 # ------------------------------------------------------------------------------ tables
 
 
@@ -426,6 +476,26 @@ class _OmniTables(_Tables):
             ranges.append((-math.pi, hi_w - TWO_PI))
         parts = [np.arange(*np.searchsorted(self.bearing, [a, z], side="left")) for a, z in ranges]
         return np.concatenate(parts)
+
+
+@dataclass(frozen=True, eq=False)
+class _PinholeTables(_Tables):
+    """Adds each pixel's ray: bearing relative to the optical axis (rad, (H, W)), elevation
+    (rad), the size of one pixel step in each (rad), the extremes per column and per row (the
+    block a landmark can touch), and the field of view."""
+
+    rel_bearing: NDArray[np.float64]
+    elevation: NDArray[np.float64]
+    bearing_step: NDArray[np.float64]
+    elevation_step: NDArray[np.float64]
+    col_min: NDArray[np.float64]
+    col_max: NDArray[np.float64]
+    row_min: NDArray[np.float64]
+    row_max: NDArray[np.float64]
+    offset_rad: float
+    half_view_rad: float
+    elevation_lo: float
+    elevation_hi: float
 
 
 def _background_color(
@@ -483,8 +553,39 @@ def _tables(calibration: Calibration) -> _Tables:
             _per_channel(np.sin(col_b))[None, :],
             noise,
         )
+    if isinstance(calibration, PinholeCalibration):
+        return _pinhole_tables(calibration, noise)
     assert isinstance(calibration, OmniCalibration)
     return _omni_tables(calibration, noise)
+
+
+def _pinhole_tables(cal: PinholeCalibration, noise: NDArray[np.float32]) -> _PinholeTables:
+    ys, xs = np.mgrid[0 : cal.height, 0 : cal.width].astype(np.float64) + 0.5
+    xn, yn = rays_of_pixels(cal, xs, ys)
+    rel = -np.arctan(xn)  # bearing relative to the optical axis, CCW positive (left)
+    elev = np.arctan2(-yn, np.hypot(xn, 1.0))
+    bearing = wrap_rad(rel + cal.offset_rad)
+    step_b = np.abs(np.gradient(rel, axis=1)) if cal.width > 1 else np.full_like(rel, 1e-3)
+    step_e = np.abs(np.gradient(elev, axis=0)) if cal.height > 1 else np.full_like(elev, 1e-3)
+    pad_b, pad_e = 1.5 * float(step_b.max()), 1.5 * float(step_e.max())
+    return _PinholeTables(
+        background=_background_color(bearing, elev),
+        cos_bearing=_per_channel(np.cos(bearing)),
+        sin_bearing=_per_channel(np.sin(bearing)),
+        noise=noise,
+        rel_bearing=rel,
+        elevation=elev,
+        bearing_step=np.maximum(step_b, 1e-9),
+        elevation_step=np.maximum(step_e, 1e-9),
+        col_min=rel.min(axis=0) - pad_b,
+        col_max=rel.max(axis=0) + pad_b,
+        row_min=elev.min(axis=1) - pad_e,
+        row_max=elev.max(axis=1) + pad_e,
+        offset_rad=cal.offset_rad,
+        half_view_rad=float(np.abs(rel).max()),
+        elevation_lo=float(elev.min()),
+        elevation_hi=float(elev.max()),
+    )
 
 
 def _omni_tables(cal: OmniCalibration, noise: NDArray[np.float32]) -> _OmniTables:

@@ -20,7 +20,9 @@ of the reference pair, which must each be the only one of their class.
 
 Optional keys: ``description`` (text); landmark ``radius`` (m, default 0.01) and ``height``
 (m, default 0.15); camera ``bearing_noise_deg`` (default 0), ``pixel_noise`` (grey-level std,
-default 2) and ``lighting`` (bool, default true); ``robot.radius`` (m, default 0.03: the
+default 2) and ``lighting`` (bool, default true), and for ``"model": "pinhole"`` ``fov_deg``
+(horizontal field of view, default 60) and ``distortion`` (``plumb_bob`` coefficients, default
+none); ``robot.radius`` (m, default 0.03: the
 robot keeps this far from walls); trajectory ``start`` may hold a third element, the start
 heading in degrees; ``seed`` defaults to 0. ``moves`` is either a count of random moves (then
 ``distance`` = [min, max] m is required) or an explicit list ``[{"turn_deg": 40,
@@ -47,17 +49,24 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
-from data_schemas.calibration import Calibration, UnwrappedCalibration, default_omni
+from data_schemas.calibration import (
+    Calibration,
+    PinholeCalibration,
+    UnwrappedCalibration,
+    default_omni,
+)
 from data_schemas.catalog import catalog_problem
 from data_schemas.codec import validate
 from data_schemas.colors import appearance_problem
-from data_schemas.errors import ScenarioError, SchemaError
+from data_schemas.errors import CalibrationError, ScenarioError, SchemaError
 from data_schemas.registry import schema_dict
 from data_schemas.session import LandmarkSpec, shared_reference_problem
 from recorder.moves import Move
 from recorder.sim.world import Arena, Landmark, Pose, SimWorld
 
 DEFAULT_LANDMARK_RADIUS_M = 0.01
+#: Horizontal field of view of a simulated pinhole camera, degrees.
+DEFAULT_PINHOLE_FOV_DEG = 60.0
 DEFAULT_LANDMARK_HEIGHT_M = 0.15
 DEFAULT_ROBOT_RADIUS_M = 0.03
 DEFAULT_PIXEL_NOISE = 2.0
@@ -95,9 +104,13 @@ class CameraSpec:
 
     Attributes
     ----------
-    model : {"unwrapped", "omni"}
+    model : {"unwrapped", "omni", "pinhole"}
     width, height : int
         Image size, pixels.
+    fov_rad : float
+        Pinhole only: horizontal field of view of the undistorted image (the focal length).
+    distortion : tuple of float
+        Pinhole only: ``plumb_bob`` coefficients (k1, k2, p1, p2[, k3]), or none.
     bearing_noise_rad : float
         Std of the Gaussian bearing noise (before truncation at the vision error bound).
     pixel_noise : float
@@ -106,12 +119,14 @@ class CameraSpec:
         Whether frames get lighting variation (global gain and a gradient).
     """
 
-    model: Literal["unwrapped", "omni"]
+    model: Literal["unwrapped", "omni", "pinhole"]
     width: int
     height: int
     bearing_noise_rad: float = 0.0
     pixel_noise: float = DEFAULT_PIXEL_NOISE
     lighting: bool = True
+    fov_rad: float = math.radians(DEFAULT_PINHOLE_FOV_DEG)
+    distortion: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -175,9 +190,18 @@ class Scenario:
 
     def calibration(self) -> Calibration:
         """The camera calibration the simulator renders with."""
-        if self.camera.model == "unwrapped":
-            return UnwrappedCalibration(self.camera.width, self.camera.height)
-        return default_omni(self.camera.width, self.camera.height)
+        cam = self.camera
+        if cam.model == "unwrapped":
+            return UnwrappedCalibration(cam.width, cam.height)
+        if cam.model == "pinhole":
+            return simulated_pinhole(cam.width, cam.height, cam.fov_rad, cam.distortion)
+        return default_omni(cam.width, cam.height)
+
+    def _pinhole_keys(self) -> dict[str, Any]:
+        cam = self.camera
+        if cam.model != "pinhole":
+            return {}
+        return {"fov_deg": _deg(cam.fov_rad), "distortion": list(cam.distortion)}
 
     def with_seed(self, seed: int) -> Scenario:
         """The same scenario with ``trajectory.seed`` replaced (``--seed`` on the CLI)."""
@@ -219,6 +243,7 @@ class Scenario:
                 "bearing_noise_deg": _deg(self.camera.bearing_noise_rad),
                 "pixel_noise": self.camera.pixel_noise,
                 "lighting": self.camera.lighting,
+                **self._pinhole_keys(),
             },
             "vision_error_deg": _deg(self.vision_error_rad),
             "trajectory": traj_doc,
@@ -330,7 +355,16 @@ def scenario_from_dict(doc: Any, *, what: str = "scenario") -> Scenario:
         math.radians(float(cam.get("bearing_noise_deg", 0.0))),
         float(cam.get("pixel_noise", DEFAULT_PIXEL_NOISE)),
         bool(cam.get("lighting", True)),
+        math.radians(float(cam.get("fov_deg", DEFAULT_PINHOLE_FOV_DEG))),
+        tuple(float(v) for v in cam.get("distortion", ())),
     )
+    if camera.model != "pinhole" and ({"fov_deg", "distortion"} & set(cam)):
+        raise fail("camera", "fov_deg and distortion are for a pinhole camera (model 'pinhole')")
+    if camera.model == "pinhole":
+        try:
+            simulated_pinhole(camera.width, camera.height, camera.fov_rad, camera.distortion)
+        except CalibrationError as exc:
+            raise fail("camera", str(exc)) from None
     robot_radius = float(doc.get("robot", {}).get("radius", DEFAULT_ROBOT_RADIUS_M))
 
     t = doc["trajectory"]
@@ -446,3 +480,21 @@ def _check_keys(doc: dict[str, Any], what: str) -> None:
     if isinstance(moves, list):
         for i, m in enumerate(moves):
             check(m, "trajectory.moves[]", f"trajectory.moves[{i}]")
+
+
+def simulated_pinhole(
+    width: int, height: int, fov_rad: float, distortion: tuple[float, ...] = ()
+) -> PinholeCalibration:
+    """The simulator's pinhole camera: square pixels, centred, looking forward, ``fov_rad`` wide
+    (undistorted), ``plumb_bob`` distortion ``distortion``; raise CalibrationError."""
+    fx = 0.5 * width / math.tan(0.5 * fov_rad)
+    return PinholeCalibration(
+        width,
+        height,
+        fx=fx,
+        fy=fx,
+        cx=0.5 * width - 0.5,
+        cy=0.5 * height - 0.5,
+        distortion=distortion,
+        distortion_model="plumb_bob",
+    )

@@ -43,8 +43,9 @@ import numpy as np
 import rerun as rr
 from numpy.typing import NDArray
 
-from data_schemas.calibration import Calibration, UnwrappedCalibration
+from data_schemas.calibration import Calibration, PinholeCalibration, UnwrappedCalibration
 from data_schemas.session import Session, shared_classes
+from pipeline.bearings.pinhole import bearing_polyline
 from replay.fig1 import log_fig1
 from replay.records import (
     AssociationRecord,
@@ -81,10 +82,14 @@ def shorten(
 def detection_segments(
     calibration: Calibration, bearings_rad: Iterable[float]
 ) -> list[NDArray[np.float64]]:
-    """Image segments (pixels, x right, y down) that mark each bearing on the panorama."""
+    """Image segments (pixels, x right, y down) that mark each bearing on the frame (pinhole: a
+    polyline bent by the lens; empty for a bearing behind the camera)."""
     segments = []
     for b in bearings_rad:
-        if isinstance(calibration, UnwrappedCalibration):
+        if isinstance(calibration, PinholeCalibration):
+            line = bearing_polyline(calibration, b)
+            segments.append(np.zeros((0, 2)) if line is None else line)
+        elif isinstance(calibration, UnwrappedCalibration):
             u = float(calibration.column_of_bearing(b))
             segments.append(np.array([[u, 0.0], [u, float(calibration.height)]]))
         else:

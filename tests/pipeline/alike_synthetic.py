@@ -94,11 +94,15 @@ def run_synthetic(
     capacity: int | None = None,
     hide: Hide | None = None,
     post_radius_m: float = 0.0,
+    view_rad: tuple[float, float] | None = None,
+    tell_view: bool = True,
 ) -> SyntheticRun:
     """``moves`` movements; the catalog says ``capacity`` (default ``n``) blue landmarks.
     With ``post_radius_m`` the landmarks are posts of that radius, and a post partly hidden
     behind a nearer one (the simulator's geometry, ``SimWorld.occluded_fractions``) has no
-    blob: the nearer one's blob stands for both."""
+    blob: the nearer one's blob stands for both. With ``view_rad = (lo, hi)`` (within
+    (-pi, pi)) the blue landmarks are seen only between those bearings (a narrow camera; the
+    reference pair stays in view), and the associator is told so if ``tell_view``."""
     import time
 
     rng = np.random.default_rng(seed)
@@ -106,7 +110,12 @@ def run_synthetic(
     sim = simulate_bearings(
         moves, rng, landmarks_world=lms, arena_m=ARENA_M, move_m=(0.2, 0.4), clearance_m=0.08
     )
-    assoc = Associator({"blue": capacity or n}, ("L1", "L2"), vision_error_rad=EPS)
+    assoc = Associator(
+        {"blue": capacity or n},
+        ("L1", "L2"),
+        vision_error_rad=EPS,
+        field_of_view_rad=view_rad if tell_view else None,
+    )
     slam = make_estimator(
         "joint", ["L1", "L2", *assoc.names], ("L1", "L2"), vision_error_rad=EPS, rng=rng
     )
@@ -131,6 +140,9 @@ def run_synthetic(
             ends = tuple(
                 {k: v for k, v in b.items() if k not in behind[e]} for e, b in enumerate(ends)
             )
+        if view_rad is not None:
+            lo, hi = view_rad
+            ends = tuple({k: v for k, v in b.items() if k[0] == "L" or lo <= v <= hi} for b in ends)
         unique = tuple(
             {k: v for k, v in b.items() if k[0] == "L" and not (hide and hide(obs.index, e, k))}
             for e, b in enumerate(ends)

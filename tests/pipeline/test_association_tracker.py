@@ -4,6 +4,7 @@ invented, the catalog count respected, hidden landmarks reported as not visible.
 from __future__ import annotations
 
 import importlib
+import math
 
 import pytest
 from alike_synthetic import run_synthetic
@@ -185,3 +186,28 @@ def test_without_the_search_such_landmarks_stay_unnamed(monkeypatch: pytest.Monk
     run = run_synthetic(8, SEEDS[0], capacity=9)
     assert not run.estimates_fl
     assert any("blue unexplained" in r.unresolved for r in run.results)
+
+
+@pytest.mark.slow  # six 30-movement runs, about 3 s
+def test_a_narrow_camera_view_is_not_counted_as_misses() -> None:
+    # blue landmarks seen only within +-45 deg of the heading: told the view, the associator
+    # reports those predicted outside it as outside the field of view (not missed), so their
+    # hypotheses and names survive; not told, every one out of view is a miss, and no
+    # hypothesis lives long enough to be named
+    view = (-math.radians(45.0), math.radians(45.0))
+    told = [run_synthetic(8, seed, moves=30, view_rad=view) for seed in SEEDS]
+    blind = [run_synthetic(8, seed, moves=30, view_rad=view, tell_view=False) for seed in SEEDS]
+    assert all(
+        any(
+            "outside the camera's field of view" in v
+            for r in run.results
+            for v in r.not_visible.values()
+        )
+        for run in told
+    )
+    assert not any(
+        "field of view" in v for run in blind for r in run.results for v in r.not_visible.values()
+    )
+    named_told = sum(len(run.estimates_fl) for run in told)
+    named_blind = sum(len(run.estimates_fl) for run in blind)
+    assert named_told >= 6 and named_told > named_blind
