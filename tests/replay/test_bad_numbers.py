@@ -168,7 +168,7 @@ GOOD_LM = {
         (
             {"model": "fisheye", "width": 100, "height": 100},
             GOOD_LM,
-            "field 'model': 'fisheye' is not one of ['unwrapped', 'omni']",
+            "field 'model': 'fisheye' is not one of ['unwrapped', 'omni', 'pinhole']",
         ),
         (
             {"model": "omni", "width": 100, "height": 100, "cx": 500, "cy": 50},
