@@ -84,9 +84,9 @@ def field_of_view_rad(calibration: PinholeCalibration) -> tuple[float, float]:
     return calibration.offset_rad + float(rel.min()), calibration.offset_rad + float(rel.max())
 
 
-def camera_view_rad(calibration: Calibration) -> tuple[float, float] | None:
+def camera_view_rad(calibration: Calibration | None) -> tuple[float, float] | None:
     """The field of view ``(lo, hi)`` of a pinhole camera (:func:`field_of_view_rad`); None for
-    a panoramic one."""
+    a panoramic one or none."""
     if isinstance(calibration, PinholeCalibration):
         return field_of_view_rad(calibration)
     return None
