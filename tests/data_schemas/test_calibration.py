@@ -67,6 +67,24 @@ def test_dict_round_trip() -> None:
         assert calibration_from_dict(cal.to_dict()) == cal
 
 
+def test_dict_form_is_in_degrees() -> None:
+    # a round trip hides a unit error made both ways: the JSON form against values by hand
+    doc = UnwrappedCalibration(255, 176, offset_rad=math.pi / 4, direction=1).to_dict()
+    assert doc["offset_deg"] == pytest.approx(45.0, abs=1e-12)
+    doc = OmniCalibration(300, 300, 150, 150, 40, 140, offset_rad=-math.pi / 2).to_dict()
+    assert doc["offset_deg"] == pytest.approx(-90.0, abs=1e-12)
+    unwrapped = calibration_from_dict(
+        {"model": "unwrapped", "width": 8, "height": 2, "offset_deg": 90}
+    )
+    assert isinstance(unwrapped, UnwrappedCalibration)
+    assert unwrapped.offset_rad == pytest.approx(math.pi / 2, abs=1e-15)
+    omni = calibration_from_dict(
+        {"model": "omni", "width": 300, "height": 300, "r_min": 40, "r_max": 140, "offset_deg": 30}
+    )
+    assert isinstance(omni, OmniCalibration)
+    assert omni.offset_rad == pytest.approx(math.pi / 6, abs=1e-15)
+
+
 @pytest.mark.parametrize(
     ("doc", "message"),
     [

@@ -22,6 +22,9 @@ def _movement() -> dict[str, object]:
 def test_round_trip_movement() -> None:
     data = encode("/robot/movement", _movement())
     assert decode("/robot/movement", data, check=True) == _movement()
+    # the bytes are the JSON of the message, as any reader decodes them
+    assert json.loads(data) == _movement()
+    assert json.loads(data)["timestamp"] == {"sec": 1, "nsec": 500_000_000}
 
 
 def test_error_names_topic_and_field() -> None:

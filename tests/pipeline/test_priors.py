@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -99,10 +100,69 @@ def test_density_zero_outside_the_cone() -> None:
     assert np.all(prior.density(outside, np.zeros(2), 0.0) == 0.0)
 
 
-def test_density_grid_shape_and_mass() -> None:
+def test_density_grid_is_the_density_on_the_grid() -> None:
     xs = np.linspace(-1.0, 21.0, 221)
     ys = np.linspace(-3.0, 3.0, 121)
-    for name in ("impartial", "gaussian", "mixture"):
-        grid = prior_density_grid(name, 0.0, math.radians(3.0), 0.1, 20.0, xs, ys)
-        assert grid.shape == (121, 221)
-        assert np.all(np.isfinite(grid)) and np.all(grid >= 0.0)
+    # three grid points with the density written out: the impartial PDF at (10, 0) seen along
+    # +x is g(0) / ((r_max - r_min) 10); the Gaussian prior's peak is on its mean range 10.05
+    eps, r_min, r_max = math.radians(3.0), 0.1, 20.0
+    g0 = 1.0 / (0.5 * eps * math.sqrt(2.0 * math.pi) * math.erf(2.0 / math.sqrt(2.0)))
+    impartial = prior_density_grid("impartial", 0.0, eps, r_min, r_max, xs, ys)
+    assert impartial.shape == (121, 221)
+    assert impartial[60, 110] == pytest.approx(g0 / ((r_max - r_min) * 10.0), rel=1e-12)
+    assert impartial[0, 110] == 0.0 and impartial[60, 0] == 0.0  # outside the cone
+    gaussian = prior_density_grid("gaussian", 0.0, eps, r_min, r_max, xs, ys)
+    s_along, s_across = (r_max - r_min) / 4.0, 10.05 * 0.5 * eps
+    peak = 1.0 / (2.0 * math.pi * s_along * s_across)
+    assert gaussian[60, 110] == pytest.approx(peak * math.exp(-0.5 * (0.05 / s_along) ** 2))
+
+
+def _ray_moments(pts: np.ndarray, origin: np.ndarray, bearing: float) -> tuple[float, ...]:
+    """Mean and std of the draws along and across the ray."""
+    d = pts - origin
+    along = d[:, 0] * math.cos(bearing) + d[:, 1] * math.sin(bearing)
+    across = d[:, 1] * math.cos(bearing) - d[:, 0] * math.sin(bearing)
+    return float(along.mean()), float(along.std()), float(across.mean()), float(across.std())
+
+
+def test_baseline_priors_against_their_formulas() -> None:
+    """Density, mass and draws of the two baselines against values written out by hand."""
+    eps, r_min, r_max, bearing = math.radians(3.0), 0.1, 20.0, 0.7
+    origin = np.array([0.3, -0.7])
+    ray = np.array([math.cos(bearing), math.sin(bearing)])
+    normal = np.array([-ray[1], ray[0]])
+    rng = np.random.default_rng(31)
+    # one Gaussian: mean range 10.05, range std 19.9 / 4, cross std 10.05 * eps / 2
+    r0, sa, sc = 10.05, 4.975, 10.05 * 0.5 * eps
+    gaussian = GaussianPrior(eps, r_min, r_max)
+    pts = origin + np.array([r0 * ray, (r0 + sa) * ray, r0 * ray + sc * normal])
+    peak = 1.0 / (2.0 * math.pi * sa * sc)
+    want = [peak, peak * math.exp(-0.5), peak * math.exp(-0.5)]
+    np.testing.assert_allclose(gaussian.density(pts, origin, bearing), want, rtol=1e-12)
+    m_along, s_along, m_across, s_across = _ray_moments(
+        gaussian.sample(200_000, origin, bearing, rng), origin, bearing
+    )
+    # 200k draws: standard errors 0.011 along, 0.0006 across
+    assert abs(m_along - r0) < 0.05 and abs(s_along - sa) < 0.05
+    assert abs(m_across) < 0.003 and abs(s_across - sc) < 0.003
+    # the Sola series for r_min = 0.1, alpha = 0.3: s0 = 0.1 / 0.7, beta = 1.3 / 0.7; the first
+    # s_j with s_j * 1.3 >= 20 is j = 8 (beta^8 = 141 >= 20 / (1.3 s0) = 108), so 9 terms
+    s = 0.1 / 0.7 * (1.3 / 0.7) ** np.arange(9)
+    mixture = MixturePrior(eps, r_min, r_max)
+    np.testing.assert_allclose(mixture.means(), s, rtol=1e-12)
+    at = origin + np.outer(s[:2], ray)
+    terms = np.exp(-0.5 * ((s[:2, None] - s[None, :]) / (0.3 * s[None, :])) ** 2) / (
+        2.0 * math.pi * (0.3 * s) * (0.5 * eps * s)
+    )
+    np.testing.assert_allclose(mixture.density(at, origin, bearing), terms.mean(axis=1))
+    m_along, s_along, _, _ = _ray_moments(
+        mixture.sample(200_000, origin, bearing, rng), origin, bearing
+    )
+    mean = s.mean()  # equal weights; each term adds its variance (0.3 s_j)^2
+    std = math.sqrt(float(np.mean((0.3 * s) ** 2 + s**2)) - mean**2)
+    assert abs(m_along - mean) < 0.03 and abs(s_along - std) < 0.03
+    # the Gaussian integrates to one over the plane (Gauss-Legendre on [-15, 35] x [-3, 3])
+    x, wx = np.polynomial.legendre.leggauss(200)
+    gx, gy = np.meshgrid(25.0 * x + 10.0, 3.0 * x, indexing="ij")
+    dens = gaussian.density(np.column_stack((gx.ravel(), gy.ravel())), np.zeros(2), 0.0)
+    assert float((25.0 * wx) @ dens.reshape(gx.shape) @ (3.0 * wx)) == pytest.approx(1.0, abs=1e-3)

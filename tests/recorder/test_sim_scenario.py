@@ -99,6 +99,11 @@ def test_explicit_moves_and_start_heading() -> None:
     assert [m.distance_m for m in s.trajectory.moves] == [0.1, 0.2]
     assert s.trajectory.moves[1].turn_rad == pytest.approx(-math.pi / 2)
     assert s.trajectory.n_moves == 2
+    # and back to degrees (a round trip alone would hide a unit error made both ways)
+    back = s.to_dict()
+    assert back["trajectory"]["start"] == [0.52, 0.34, 90.0]
+    assert [m["turn_deg"] for m in back["trajectory"]["moves"]] == [0.0, -90.0]
+    assert back["camera"]["bearing_noise_deg"] == 1.0 and back["vision_error_deg"] == 3.0
 
 
 Edit = Callable[[dict[str, Any]], None]
