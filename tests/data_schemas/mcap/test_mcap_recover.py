@@ -130,7 +130,7 @@ def test_cut_anywhere_keeps_every_complete_message(finished: Path, tmp_path: Pat
     spans = _spans(data)
     assert [m for m, _, _ in spans] == _messages(finished)
     broken, fixed = tmp_path / "cut.mcap", tmp_path / "fixed.mcap"
-    for cut in _offsets(len(data), 80, seed=1):
+    for cut in _offsets(len(data), 48, seed=1):
         broken.write_bytes(data[:cut])
         want = [m for m, _, end in spans if end <= cut]
         # the chunks the library itself reads whole from the cut bytes come first
@@ -153,7 +153,7 @@ def test_one_flipped_byte_anywhere(finished: Path, tmp_path: Path) -> None:
     first_chunk = summary.chunk_indexes[0].chunk_start_offset
     broken, fixed = tmp_path / "flip.mcap", tmp_path / "fixed.mcap"
     rng = np.random.default_rng(2)
-    for offset in _offsets(len(data), 80, seed=3):
+    for offset in _offsets(len(data), 48, seed=3):
         damaged = bytearray(data)
         damaged[offset] ^= int(rng.integers(1, 256))
         broken.write_bytes(bytes(damaged))
