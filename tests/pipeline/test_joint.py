@@ -329,7 +329,23 @@ def test_resection_recovers_a_movement_from_known_points() -> None:
     assert found.pose.o1_fl == pytest.approx(o1, abs=1e-6)
     assert found.pose.heading_rad == pytest.approx(h, abs=1e-6)
     assert found.pose.length_fl == pytest.approx(d, abs=1e-6)
-    assert np.isfinite(found.position_std_fl)
+
+    # the stds against a numerical Jacobian of the bearings in (x1, y1, heading, log d): the
+    # covariance for a bearing noise of 1 rad is (J^T J)^-1
+    def bearings(q: np.ndarray) -> np.ndarray:
+        start = q[:2]
+        end = start + math.exp(q[3]) * np.array([math.cos(q[2]), math.sin(q[2])])
+        at = np.where(ends[:, None] == 0, start, end)
+        out: np.ndarray = np.arctan2(pp[:, 1] - at[:, 1], pp[:, 0] - at[:, 0]) - q[2]
+        return out
+
+    q0 = np.array([*o1, h, math.log(d)])
+    steps = np.eye(4) * 1e-6
+    jac = np.column_stack([(bearings(q0 + e) - bearings(q0 - e)) / 2e-6 for e in steps])
+    cov = np.linalg.inv(jac.T @ jac)
+    worst = math.sqrt(float(np.linalg.eigvalsh(cov[:2, :2]).max()))
+    assert found.position_std_fl == pytest.approx(worst, rel=1e-6)
+    assert found.log_length_std == pytest.approx(math.sqrt(cov[3, 3]), rel=1e-6)
 
 
 def test_ray_intersection_ignores_a_wrong_ray() -> None:
