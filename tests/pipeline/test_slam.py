@@ -176,5 +176,15 @@ def test_result_shapes() -> None:
     assert res.o1_fl.shape == (2500, 2) and res.o2_fl.shape == (2500, 2)
     assert set(res.estimates) <= {"L3", "L4"}
     assert len(slam.trajectory_fl) == 1
-    for c1, c2 in res.cones_fr.values():
-        assert np.all(np.isfinite(c1)) and np.all(np.isfinite(c2))
+    # each cone: its near arc at r_min, its far arc at r_max, within eps of the measured bearing
+    assert set(res.cones_fr) == set(obs.bearings_o1_rad) & set(obs.bearings_o2_rad)
+    for name, cones in res.cones_fr.items():
+        bearings = (obs.bearings_o1_rad[name], obs.bearings_o2_rad[name])
+        for origin, cone, bearing in zip(((0.0, 0.0), (1.0, 0.0)), cones, bearings, strict=True):
+            d = cone - np.array(origin)
+            k = cone.shape[0] // 2
+            r = np.hypot(d[:, 0], d[:, 1])
+            np.testing.assert_allclose(r, [0.1] * k + [20.0] * k, rtol=1e-12)  # the default bounds
+            off = np.angle(np.exp(1j * (np.arctan2(d[:, 1], d[:, 0]) - bearing)))
+            assert np.all(np.abs(off) <= EPS + 1e-9)
+            assert np.ptp(off) == pytest.approx(2 * EPS)
