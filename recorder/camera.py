@@ -75,6 +75,16 @@ _OPEN_HINTS: dict[SourceKind, str] = {
 }
 
 
+def quiet_opencv() -> None:
+    """Silence OpenCV's own log lines (``[ WARN:0] ... can't open camera by index``) on stderr.
+
+    A camera that fails is reported once, as our one-line error. A user who set
+    ``OPENCV_LOG_LEVEL`` keeps that level.
+    """
+    if "OPENCV_LOG_LEVEL" not in os.environ:
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+
+
 class OpenCVCamera:
     """A camera read through ``cv2.VideoCapture``.
 
@@ -106,6 +116,7 @@ class OpenCVCamera:
         self._calibration = calibration
         if self.kind == "file" and not os.path.exists(source):
             raise CameraError(f"cannot open camera {source}: no such file; {_OPEN_HINTS['file']}")
+        quiet_opencv()
         self._capture = capture_factory(int(source) if self.kind == "device" else source)
         if not self._capture.isOpened():
             self._capture.release()

@@ -122,7 +122,10 @@ def run_tasks(
         require("distributed", extra="experiments", feature="a Dask scheduler (--scheduler)")
     guarded = partial(_guarded, fn)
     outcomes: list[Outcome[T]] = []
-    bar = tqdm(total=len(tasks), desc=desc, unit=unit, file=sys.stderr, disable=not progress)
+    # a bar only on a terminal (tqdm's disable=None), and only if asked
+    bar = tqdm(
+        total=len(tasks), desc=desc, unit=unit, file=sys.stderr, disable=None if progress else True
+    )
 
     def done(outcome: Outcome[T]) -> None:
         outcomes.append(outcome)

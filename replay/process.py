@@ -137,7 +137,8 @@ def result_line(doc: dict[str, Any]) -> str:
     text = f"{used}/{len(moves)} movements used"
     if resected:
         text += f" ({resected} placed by resection)"
-    text += f", {len(doc['landmarks'])} landmarks mapped"
+    pair = f"{doc['frame']['origin']}, {doc['frame']['x_axis']}"  # fixed in FL, never "mapped"
+    text += f", {len(doc['landmarks'])} landmarks mapped besides the reference pair {pair}"
     if "bearing_noise_deg" in doc:
         text += f", bearing noise {doc['bearing_noise_deg']:.2f} deg"
     if "mean_error_m" in doc:

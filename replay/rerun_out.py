@@ -18,7 +18,7 @@ from data_schemas.outputs import OutputGuard
 from replay.blueprint import method_blueprint
 from replay.follow import FollowedLog
 from replay.process import open_log, process_log
-from replay.records import PRIORS, MethodConfig
+from replay.records import PRIORS, MethodConfig, Sink
 from replay.sinks.rerun_sink import RerunSink
 from replay.stages import MessageLog
 
@@ -173,15 +173,19 @@ def replay_log(
     out: str | os.PathLike[str] | None = None,
     summary: str | os.PathLike[str] | None = None,
     force: bool = False,
+    extra_sinks: tuple[Sink, ...] = (),
 ) -> dict[str, Any]:
     """Stream every stage of ``log`` to ``rec`` (and Fig. 1); return the summary document.
 
     ``out`` and ``summary``, if given, also receive the derived log and the summary JSON
     (existing ones replaced only with ``force``). ``live``: frames are sent with each movement
-    (a log being followed), not in batches.
+    (a log being followed), not in batches. ``extra_sinks`` are fed by the same pass (a
+    progress bar).
     """
     sink = RerunSink(rec, images=images, live=live)
-    return process_log(log, method, out=out, summary=summary, extra_sinks=(sink,), force=force)
+    return process_log(
+        log, method, out=out, summary=summary, extra_sinks=(sink, *extra_sinks), force=force
+    )
 
 
 def save_rrd(

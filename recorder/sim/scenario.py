@@ -283,6 +283,27 @@ def load_scenario(path: str | Path) -> Scenario:
     return scenario_from_dict(doc, what=f"scenario {p.name}")
 
 
+def scenario_named(name_or_path: str | Path) -> Scenario:
+    """A built-in scenario (:data:`BUILTIN_SCENARIOS`) by name, else a scenario file.
+
+    Raises
+    ------
+    ScenarioError
+        Neither a built-in name nor a file (the close built-in names are suggested), or a file
+        that is not a valid scenario.
+    """
+    if str(name_or_path) in BUILTIN_SCENARIOS:
+        return builtin_scenario(str(name_or_path))
+    if not Path(name_or_path).exists():
+        close = difflib.get_close_matches(str(name_or_path), BUILTIN_SCENARIOS, n=2)
+        hint = f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
+        raise ScenarioError(
+            f"{str(name_or_path)!r} is neither a scenario file nor a built-in scenario; {hint}"
+            f"the built-in ones: {', '.join(BUILTIN_SCENARIOS)}"
+        )
+    return load_scenario(name_or_path)
+
+
 def builtin_scenario(name: str) -> Scenario:
     """A scenario shipped with bearing-slam (see :data:`BUILTIN_SCENARIOS`)."""
     if name not in BUILTIN_SCENARIOS:

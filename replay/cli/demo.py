@@ -43,6 +43,7 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool, estimator: str) -> N
     from replay.process import result_line
     from replay.records import MethodConfig
     from replay.rerun_out import save_rrd
+    from replay.sinks.progress import ProgressSink
 
     log = out_dir / "demo.mcap"
     rrd, derived, summary = (
@@ -75,8 +76,11 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool, estimator: str) -> N
             out=derived,
             summary=summary,
             force=force,
+            extra_sinks=(ProgressSink(total=sim.trajectory.n_moves),),
         )
     click.echo(f"map: {result_line(doc)}")
+    l1, l2 = doc["frame"]["origin"], doc["frame"]["x_axis"]
+    click.echo(f"landmarks in FL, the map frame: {l1} at (0, 0), {l2} at (1, 0), unit |{l1} {l2}|")
     for name, est in doc["landmarks"].items():
         x, y = est["mean"]
         err = doc.get("error_m", {}).get(name)

@@ -109,7 +109,9 @@ class _WarningEcho(logging.Handler):
     """Echo each record to the current stderr as ``warning: <message>``."""
 
     def emit(self, record: logging.LogRecord) -> None:
-        click.echo(f"warning: {record.getMessage()}", err=True)
+        from tqdm import tqdm  # above a progress bar, if one is drawn
+
+        tqdm.write(f"warning: {record.getMessage()}", file=sys.stderr)
 
 
 @contextmanager
@@ -206,6 +208,7 @@ def process(
     from replay.batch import expand_logs, plan_jobs
     from replay.process import dumps, process_log, result_line
     from replay.records import MethodConfig
+    from replay.sinks.progress import ProgressSink
 
     method = MethodConfig(
         prior=prior,
@@ -233,6 +236,7 @@ def process(
                 force=force,
                 skip_corrupt=skip_corrupt,
                 window=window,
+                extra_sinks=(ProgressSink.for_log(paths[0], window),),
             )
         if out is None and summary is None:
             click.echo(dumps(doc))

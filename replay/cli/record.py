@@ -61,9 +61,10 @@ def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tu
 )
 @click.option(
     "--turn-deg",
-    type=FiniteFloat(),
+    type=FiniteFloat(min=-180.0, max=180.0),
     default=None,
-    help="Fixed turn before each drive (default random).",
+    help="Fixed turn in place before each drive, degrees, counter-clockwise positive "
+    "[default: random].",
 )
 @click.option("--seed", type=SEED, default=None, help="Seed of the random turns and distances.")
 @frame_options

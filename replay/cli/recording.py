@@ -175,7 +175,7 @@ def run_recording(
                 unit="move",
                 file=sys.stderr,
                 desc="recording",
-                disable=quiet,
+                disable=True if quiet else None,  # None: only on a terminal
                 delay=0.5,
             ) as bar:
 

@@ -48,7 +48,7 @@ def regress(folder: Path, update: bool, tolerance: float | None, estimator: str 
     from replay.regress import MEAN_TOL, CaseResult, find_cases, run_regression
 
     total = len(find_cases(folder, update=update, estimator=estimator))
-    bar = tqdm(total=total, desc="regress", unit="log", file=sys.stderr, delay=0.5)
+    bar = tqdm(total=total, desc="regress", unit="log", file=sys.stderr, delay=0.5, disable=None)
 
     def report(result: CaseResult) -> None:
         bar.update()

@@ -110,6 +110,7 @@ def replay(
         save_rrd,
         serve_web_viewer,
     )
+    from replay.sinks.progress import ProgressSink
 
     chosen = [
         k
@@ -148,8 +149,16 @@ def replay(
         )
         with opened:
             source = windowed(opened, window) if window else opened
+            bars = () if follow else (ProgressSink.for_log(log, window),)
             if save:
-                doc = save_rrd(source, method, save, force=force, images=not keyframes_only)
+                doc = save_rrd(
+                    source,
+                    method,
+                    save,
+                    force=force,
+                    images=not keyframes_only,
+                    extra_sinks=bars,
+                )
             else:
                 target = RerunTarget(
                     chosen[0],  # type: ignore[arg-type]
@@ -162,7 +171,14 @@ def replay(
                     click.echo(f"web viewer: {address.web_url}")
                     click.echo(f"native viewer: rerun {address.grpc_url}")
                 try:
-                    doc = replay_log(source, method, rec, images=not keyframes_only, live=follow)
+                    doc = replay_log(
+                        source,
+                        method,
+                        rec,
+                        images=not keyframes_only,
+                        live=follow,
+                        extra_sinks=bars,
+                    )
                 finally:
                     if not serve:
                         rec.disconnect()

@@ -69,14 +69,11 @@ def simulate(
     every frame.
     """
     from recorder.record import RecordSettings
-    from recorder.sim.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
+    from recorder.sim.scenario import BUILTIN_SCENARIOS, scenario_named
     from recorder.sim.simulate import SimSettings, simulate_to_file
     from replay.cli.recording import live_view, run_recording
 
-    if scenario_arg in BUILTIN_SCENARIOS:
-        scenario = builtin_scenario(scenario_arg)
-    else:
-        scenario = load_scenario(scenario_arg)
+    scenario = scenario_named(scenario_arg)
     if seed is not None:
         scenario = scenario.with_seed(seed)
     settings = SimSettings(

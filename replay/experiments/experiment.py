@@ -32,11 +32,9 @@ from replay.parallel import run_tasks
 
 def scenario_doc(name_or_path: str) -> dict[str, Any]:
     """A built-in scenario (``paper``, ``paper_omni``) or a scenario file, as a validated dict."""
-    from recorder.sim.scenario import BUILTIN_SCENARIOS, builtin_scenario, load_scenario
+    from recorder.sim.scenario import scenario_named
 
-    if name_or_path in BUILTIN_SCENARIOS:
-        return builtin_scenario(name_or_path).to_dict()
-    return load_scenario(Path(name_or_path)).to_dict()
+    return scenario_named(name_or_path).to_dict()
 
 
 def methods_of(protocol: Protocol) -> list[str]:
