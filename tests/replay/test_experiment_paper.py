@@ -158,7 +158,7 @@ def test_out_is_a_file_and_unknown_sweep_param(tmp_path: Path) -> None:
             "scenario with vision_error_deg=95: field 'vision_error_deg': 95.0 is greater than",
         ),
         ("bearing_noise_deg", "-1", 1, "field 'camera.bearing_noise_deg': -1.0 is less than"),
-        ("camera_model", "unwrapped,fisheye", 1, "scenario file 'fisheye' does not exist"),
+        ("camera_model", "unwrapped,fisheye", 1, "'fisheye' is neither a scenario file"),
     ],
 )
 def test_sweep_bad_values_are_one_line_and_create_nothing(
