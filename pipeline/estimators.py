@@ -15,14 +15,12 @@ import numpy as np
 
 from data_schemas.errors import EstimationError
 from pipeline.estimate import LandmarkEstimate
-from pipeline.fusion import PAPER_N_L
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
 
 EstimatorName = Literal["joint", "paper"]
-#: Estimator names, the default first.
+#: Estimator names (the default first, as ``replay.defaults.ESTIMATORS``).
 ESTIMATORS: tuple[EstimatorName, ...] = ("joint", "paper")
-DEFAULT_ESTIMATOR: EstimatorName = "joint"
 
 
 class Estimator(Protocol):
@@ -39,11 +37,6 @@ class Estimator(Protocol):
         """Drop landmark ``name`` and what it was given so far (its name was found wrong)."""
 
 
-#: Default relative std of the joint estimator's prior on each movement's length from its driven
-#: distance (docs/method.md, the joint estimator: measured on the paper protocol).
-DEFAULT_DISTANCE_PRIOR_REL = 0.05
-
-
 def make_estimator(
     name: str,
     landmarks: Sequence[str],
@@ -51,17 +44,19 @@ def make_estimator(
     *,
     vision_error_rad: float,
     rng: np.random.Generator,
-    prior: PriorName = "impartial",
-    n_r: int = 50,
-    n_l: int = PAPER_N_L,
-    turn_prior_sigma_rad: float | None = None,
-    distance_prior_rel: float | None = None,
+    prior: PriorName,
+    n_r: int,
+    n_l: int,
+    turn_prior_sigma_rad: float | None,
+    distance_prior_rel: float | None,
 ) -> Estimator:
     """The estimator called ``name`` (``"joint"`` or ``"paper"``), set up for one run.
 
     ``paper`` is :class:`~pipeline.slam.BearingSlam` exactly as the paper's method;
     ``joint`` is :class:`~pipeline.joint.JointSlam`, initialized by the same filter.
-    ``turn_prior_sigma_rad`` and ``distance_prior_rel`` only concern the joint estimator.
+    ``turn_prior_sigma_rad`` and ``distance_prior_rel`` only concern the joint estimator. Every
+    setting is given: the defaults live in one place, ``replay.defaults`` (used through
+    ``replay.records.MethodConfig`` and ``replay.estimation.estimator_for``).
     """
     common = {"vision_error_rad": vision_error_rad, "prior": prior, "n_r": n_r, "n_l": n_l}
     if name == "paper":

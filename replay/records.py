@@ -18,8 +18,9 @@ from data_schemas.errors import EstimationError
 from data_schemas.session import Session
 from pipeline.association.final import STATUSES, FinalDetection
 from pipeline.bearings import Detection
-from pipeline.estimators import DEFAULT_DISTANCE_PRIOR_REL, DEFAULT_ESTIMATOR, ESTIMATORS
+from pipeline.estimators import ESTIMATORS
 from pipeline.priors import PriorName
+from replay import defaults
 from replay.truth import Truth
 
 #: the prior names, in the order of ``pipeline.priors.PriorName``
@@ -28,7 +29,7 @@ PRIORS: tuple[PriorName, ...] = get_args(PriorName)
 
 @dataclass(frozen=True)
 class MethodConfig:
-    """Estimator settings of one run (``bslam process`` options).
+    """Estimator settings of one run (``bslam process`` options; defaults: ``replay.defaults``).
 
     Attributes
     ----------
@@ -50,13 +51,13 @@ class MethodConfig:
         An expected summary without it was made with the lengths free (``replay.regress``).
     """
 
-    prior: str = "impartial"
-    n_r: int = 50
-    n_l: int = 300
-    seed: int = 0
-    estimator: str = DEFAULT_ESTIMATOR
-    turn_prior_deg: float | None = None
-    distance_prior: float | None = DEFAULT_DISTANCE_PRIOR_REL
+    prior: str = defaults.PRIOR
+    n_r: int = defaults.N_R
+    n_l: int = defaults.N_L
+    seed: int = defaults.SEED
+    estimator: str = defaults.ESTIMATOR
+    turn_prior_deg: float | None = defaults.TURN_PRIOR_DEG
+    distance_prior: float | None = defaults.DISTANCE_PRIOR_REL
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:

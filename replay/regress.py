@@ -22,7 +22,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from data_schemas.errors import BslamError, LogError
-from pipeline.estimators import DEFAULT_ESTIMATOR, ESTIMATORS
+from pipeline.estimators import ESTIMATORS
+from replay.defaults import ESTIMATOR as DEFAULT_ESTIMATOR
 from replay.records import MethodConfig
 
 #: Default tolerance on a landmark mean, FL units (|L1 L2| = 0.3 m makes it 0.3 mm).

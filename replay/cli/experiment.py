@@ -11,13 +11,13 @@ from typing import Any
 import click
 
 from data_schemas.errors import BslamError
+from replay import defaults
 from replay.cli.options import SEED
 from replay.cli.process import MAX_N_L, MAX_N_R, distance_prior_option
 from replay.experiments.protocol import (
     ALL_SWEEP_PARAMS,
     FRAME_CHANGES,
     PAPER_N_L_VALUES,
-    PRIORS,
     ProtocolError,
     check_sweep_values,
 )
@@ -49,10 +49,10 @@ def _int_list(ctx: click.Context, param: click.Parameter, text: str) -> tuple[in
 def _priors(ctx: click.Context, param: click.Parameter, text: str) -> tuple[str, ...]:
     """``--priors``: a comma-separated, non-empty subset of the prior names."""
     priors = tuple(p.strip() for p in text.split(",") if p.strip())
-    unknown = [p for p in priors if p not in PRIORS]
+    unknown = [p for p in priors if p not in defaults.PRIORS]
     if unknown or not priors:
         raise click.BadParameter(
-            f"expected a comma-separated list of {', '.join(PRIORS)}, got {text!r}"
+            f"expected a comma-separated list of {', '.join(defaults.PRIORS)}, got {text!r}"
         )
     return priors
 
@@ -90,7 +90,7 @@ def _common(fn: Any) -> Any:
             "--n-r",
             "n_r",
             type=click.IntRange(2, MAX_N_R),
-            default=50,
+            default=defaults.N_R,
             show_default=True,
             help="Particles per landmark in FR.",
         ),
@@ -98,13 +98,13 @@ def _common(fn: Any) -> Any:
             "--n-l",
             "n_l",
             type=click.IntRange(2, MAX_N_L),
-            default=300,
+            default=defaults.N_L,
             show_default=True,
             help="Particles per landmark in FL.",
         ),
         click.option(
             "--priors",
-            default=",".join(PRIORS),
+            default=",".join(defaults.PRIORS),
             show_default=True,
             callback=_priors,
             help="Single-view priors to compare.",

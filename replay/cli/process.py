@@ -11,28 +11,23 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from replay import defaults
 from replay.cli.follow import end_of_follow, follow_options
 from replay.cli.options import SEED, FiniteFloat, window_options
-from replay.experiments.protocol import DEFAULT_DISTANCE_PRIOR, PRIORS
 
 if TYPE_CHECKING:
     from data_schemas.mcap.window import Bound
     from replay.batch import LogJob
     from replay.records import MethodConfig
 
-#: the prior names without importing numpy for --help (the same tuple as the experiments')
-PRIOR_CHOICES = PRIORS
 #: Largest particle counts: FR keeps n_r^2 observation points per movement (2000: 64 MB).
 MAX_N_R = 2_000
 MAX_N_L = 100_000
-#: --estimator choices, the default first (pipeline.estimators.ESTIMATORS; not imported here so
-#: that `bslam --help` stays light)
-ESTIMATOR_CHOICES = ("joint", "paper")
 
 estimator_option = click.option(
     "--estimator",
-    type=click.Choice(ESTIMATOR_CHOICES),
-    default=ESTIMATOR_CHOICES[0],
+    type=click.Choice(defaults.ESTIMATORS),
+    default=defaults.ESTIMATOR,
     show_default=True,
     help="joint: every bearing in one factor graph (GTSAM), initialized by the paper's filter; "
     "paper: the paper's filter alone.",
@@ -48,7 +43,7 @@ distance_prior_option = click.option(
     "distance_prior",
     type=FiniteFloat(min=0.0),
     callback=_zero_is_off,
-    default=DEFAULT_DISTANCE_PRIOR,
+    default=defaults.DISTANCE_PRIOR_REL or 0.0,
     show_default=True,
     metavar="FRACTION",
     help="Joint estimator: trust each movement's driven distance (odometry, else the "
@@ -65,7 +60,7 @@ def method_options(fn: click.decorators.FC) -> click.decorators.FC:
                 "--turn-prior",
                 "turn_prior_deg",
                 type=click.FloatRange(0.0, min_open=True),
-                default=None,
+                default=defaults.TURN_PRIOR_DEG,
                 metavar="DEG",
                 help="Joint estimator: trust each commanded turn in place to this std "
                 "(degrees) [default: turns free].",
@@ -73,29 +68,29 @@ def method_options(fn: click.decorators.FC) -> click.decorators.FC:
             distance_prior_option,
             click.option(
                 "--prior",
-                type=click.Choice(PRIOR_CHOICES),
-                default="impartial",
+                type=click.Choice(defaults.PRIORS),
+                default=defaults.PRIOR,
                 show_default=True,
                 help="Density of one bearing: the paper's impartial PDF or a baseline.",
             ),
             click.option(
                 "--n-r",
                 type=click.IntRange(2, MAX_N_R),
-                default=50,
+                default=defaults.N_R,
                 show_default=True,
                 help="Particles per landmark in FR.",
             ),
             click.option(
                 "--n-l",
                 type=click.IntRange(2, MAX_N_L),
-                default=300,
+                default=defaults.N_L,
                 show_default=True,
                 help="Particles per landmark in FL.",
             ),
             click.option(
                 "--seed",
                 type=SEED,
-                default=0,
+                default=defaults.SEED,
                 show_default=True,
                 help="Seed of the estimator's random generator.",
             ),

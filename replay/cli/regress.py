@@ -9,8 +9,8 @@ from pathlib import Path
 
 import click
 
+from replay import defaults
 from replay.cli.options import FiniteFloat
-from replay.cli.process import ESTIMATOR_CHOICES
 
 DEFAULT_DIR = Path("tests/data/regress")
 
@@ -30,7 +30,7 @@ DEFAULT_DIR = Path("tests/data/regress")
 )
 @click.option(
     "--estimator",
-    type=click.Choice(ESTIMATOR_CHOICES),
+    type=click.Choice(defaults.ESTIMATORS),
     default=None,
     help="Only the expected summaries this estimator made; with --update, create them where "
     "missing [default: all].",

@@ -110,7 +110,7 @@ def joint_rows(
     n_r: int,
     n_l: int,
     rng: np.random.Generator,
-    distance_prior_rel: float | None = None,
+    distance_prior_rel: float | None,
 ) -> list[ErrorRow]:
     """Run the joint estimator (initialized by the paper's filter) over the observations, with
     a prior on each movement's length from ``distance_m`` if ``distance_prior_rel`` is given."""
@@ -119,9 +119,11 @@ def joint_rows(
         ctx.landmarks,
         ctx.reference,
         vision_error_rad=ctx.vision_error_rad,
+        prior="impartial",  # the joint method is initialized by the paper's impartial PDF
         n_r=n_r,
         n_l=n_l,
         rng=rng,
+        turn_prior_sigma_rad=None,  # simulated straight movements: no commanded turn is trusted
         distance_prior_rel=distance_prior_rel,
     )
     rows = []

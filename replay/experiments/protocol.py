@@ -13,15 +13,12 @@ from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 from data_schemas.errors import BslamError
+from replay import defaults
+from replay.defaults import PRIORS
 
-#: pipeline.priors.PriorName's values, spelled out here so that the CLI's option list (which
-#: imports this module) needs no numpy; tests/replay/test_experiment_paper.py checks they agree
-PRIORS = ("impartial", "gaussian", "mixture")
 FRAME_CHANGES = ("sampled", "exact")
 #: the paper's Fig. 8 particle counts
 PAPER_N_L_VALUES = (50, 100, 200, 300, 500, 1000)
-#: pipeline.estimators.DEFAULT_DISTANCE_PRIOR_REL (no numpy here either; a test checks they agree)
-DEFAULT_DISTANCE_PRIOR = 0.05
 
 
 class ProtocolError(BslamError):
@@ -60,8 +57,8 @@ class Protocol:
 
     runs: int = 40
     movements: int = 10
-    n_r: int = 50
-    n_l: int = 300
+    n_r: int = defaults.N_R
+    n_l: int = defaults.N_L
     priors: tuple[str, ...] = PRIORS
     n_l_values: tuple[int, ...] = PAPER_N_L_VALUES
     n_l_movements: int = 3
@@ -70,7 +67,7 @@ class Protocol:
     crb: bool = True
     frame_change: str = "sampled"
     seed: int = 0
-    distance_prior: float | None = DEFAULT_DISTANCE_PRIOR
+    distance_prior: float | None = defaults.DISTANCE_PRIOR_REL
 
     def __post_init__(self) -> None:
         if self.runs < 1 or self.movements < 1:

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import BslamError
-from replay.experiments.protocol import PRIORS
+from replay.defaults import PRIORS
 
 RESULTS_NAME = "results.json"
 CSV_NAME = "errors.csv"

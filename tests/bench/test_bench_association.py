@@ -44,7 +44,18 @@ def _yardstick(n: int, seed: int) -> float:
     sim = simulate_bearings(
         MOVES, rng, landmarks_world=lms, arena_m=ARENA_M, move_m=(0.2, 0.4), clearance_m=0.08
     )
-    slam = make_estimator("joint", list(lms), ("L1", "L2"), vision_error_rad=EPS, rng=rng)
+    slam = make_estimator(
+        "joint",
+        list(lms),
+        ("L1", "L2"),
+        vision_error_rad=EPS,
+        rng=rng,
+        prior="impartial",
+        n_r=50,
+        n_l=300,
+        turn_prior_sigma_rad=None,
+        distance_prior_rel=None,
+    )
     tick = time.perf_counter()
     for obs in sim.observations:
         slam.process_movement(obs)

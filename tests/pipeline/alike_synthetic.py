@@ -117,7 +117,16 @@ def run_synthetic(
         field_of_view_rad=view_rad if tell_view else None,
     )
     slam = make_estimator(
-        "joint", ["L1", "L2", *assoc.names], ("L1", "L2"), vision_error_rad=EPS, rng=rng
+        "joint",
+        ["L1", "L2", *assoc.names],
+        ("L1", "L2"),
+        vision_error_rad=EPS,
+        rng=rng,
+        prior="impartial",
+        n_r=50,
+        n_l=300,
+        turn_prior_sigma_rad=None,
+        distance_prior_rel=None,
     )
     out = SyntheticRun(assoc, truth_fl=sim.truth_fl(("L1", "L2")), unit_m=math.dist(*REFERENCE_M))
     posts = None

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -295,14 +296,28 @@ def test_unplaceable_movement_waits_and_is_placed_later() -> None:
     assert slam.waiting_movements == [] and slam.used_movements == [0, 1]
 
 
+#: make_estimator's settings, all given (it has no defaults): the paper's filter, lengths free
+FREE: dict[str, Any] = {
+    "prior": "impartial",
+    "n_r": 50,
+    "n_l": 300,
+    "turn_prior_sigma_rad": None,
+    "distance_prior_rel": None,
+}
+
+
 def test_factory_and_bad_arguments() -> None:
     args = (["A", "B", "C"], ("A", "B"))
-    paper = make_estimator("paper", *args, vision_error_rad=EPS, rng=np.random.default_rng(0))
+    paper = make_estimator(
+        "paper", *args, vision_error_rad=EPS, rng=np.random.default_rng(0), **FREE
+    )
     assert type(paper).__name__ == "BearingSlam"
-    joint = make_estimator("joint", *args, vision_error_rad=EPS, rng=np.random.default_rng(0))
+    joint = make_estimator(
+        "joint", *args, vision_error_rad=EPS, rng=np.random.default_rng(0), **FREE
+    )
     assert isinstance(joint, JointSlam)
     with pytest.raises(EstimationError, match="unknown estimator 'kalman'"):
-        make_estimator("kalman", *args, vision_error_rad=EPS, rng=np.random.default_rng(0))
+        make_estimator("kalman", *args, vision_error_rad=EPS, rng=np.random.default_rng(0), **FREE)
     with pytest.raises(EstimationError, match="turn prior std must be > 0"):
         JointSlam(
             *args, vision_error_rad=EPS, rng=np.random.default_rng(0), turn_prior_sigma_rad=0.0

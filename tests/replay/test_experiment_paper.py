@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from replay.cli import COMMANDS, cli
-from replay.experiments.protocol import DEFAULT_DISTANCE_PRIOR
+from replay.defaults import DISTANCE_PRIOR_REL
 from replay.experiments.results import read_results
 from replay.experiments.stats import movement_curve
 
@@ -56,7 +56,7 @@ def test_tiny_paper_experiment_end_to_end(tmp_path: Path) -> None:
     methods = {r.method for r in res.rows}
     assert methods == {"impartial", "gaussian", "mixture", "joint", "batch_ls", "crb"}
     assert len([r for r in res.rows if r.method == "joint"]) == 3 * 4 * 2
-    assert res.config["protocol"]["distance_prior"] == DEFAULT_DISTANCE_PRIOR
+    assert res.config["protocol"]["distance_prior"] == DISTANCE_PRIOR_REL
     # shape: 3 runs x 4 movements x 2 scored landmarks per method (n_l sweep: 3 movements)
     main = [r for r in res.rows if r.method == "impartial" and r.n_l == 100]
     assert len(main) == 3 * 4 * 2
@@ -241,26 +241,27 @@ def test_run_that_cannot_be_simulated_is_reported_in_one_line(tmp_path: Path) ->
     assert "trajectory.distance" in outcome.error and "\n" not in outcome.error
 
 
-def test_prior_names_agree_with_the_estimator() -> None:
+def test_names_agree_with_the_estimator() -> None:
+    # replay.defaults spells the names out so that the CLI needs no numpy
     from typing import get_args
 
+    from pipeline.estimators import ESTIMATORS
     from pipeline.priors import PriorName
-    from replay.cli.process import PRIOR_CHOICES
-    from replay.experiments.protocol import PRIORS
+    from replay import defaults
     from replay.records import PRIORS as RECORD_PRIORS
 
-    assert PRIORS == PRIOR_CHOICES == RECORD_PRIORS == get_args(PriorName)
+    assert defaults.PRIORS == RECORD_PRIORS == get_args(PriorName)
+    assert defaults.ESTIMATORS == ESTIMATORS
 
 
-def test_distance_prior_default_agrees_with_the_estimator() -> None:
-    from pipeline.estimators import DEFAULT_DISTANCE_PRIOR_REL
-    from replay.experiments.protocol import DEFAULT_DISTANCE_PRIOR, Protocol
+def test_distance_prior_default_is_shared() -> None:
+    from replay.experiments.protocol import Protocol
     from replay.records import MethodConfig
 
-    assert DEFAULT_DISTANCE_PRIOR == DEFAULT_DISTANCE_PRIOR_REL
-    assert Protocol().distance_prior == MethodConfig().distance_prior == DEFAULT_DISTANCE_PRIOR
+    assert DISTANCE_PRIOR_REL is not None
+    assert Protocol().distance_prior == MethodConfig().distance_prior == DISTANCE_PRIOR_REL
     # the summary says what made the map: the prior when the joint estimator used it
-    assert MethodConfig().summary(0.05)["distance_prior"] == DEFAULT_DISTANCE_PRIOR
+    assert MethodConfig().summary(0.05)["distance_prior"] == DISTANCE_PRIOR_REL
     assert "distance_prior" not in MethodConfig(distance_prior=None).summary(0.05)
     assert "distance_prior" not in MethodConfig(estimator="paper").summary(0.05)
 
