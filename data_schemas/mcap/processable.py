@@ -9,7 +9,7 @@ before any of its messages is handed out. Anything else (unchunked files, no sum
 incomplete one, damage with ``skip_corrupt``) is checked whole at open by
 :class:`data_schemas.mcap.scan.LogScan` and read through it. Every
 problem a user can cause is one line: not MCAP, unfinished or corrupt (``bslam recover``, or
-``--skip-corrupt`` to process the rest), no session metadata, no camera calibration, a known
+``--skip-corrupt`` to process the rest), no session metadata, a camera without calibration, a known
 channel with the wrong schema. Channels this version does not know (another tool's ``/chatter``
 beside ours) are ignored, with a note in :attr:`ProcessableLog.notes`.
 """
@@ -46,7 +46,8 @@ from data_schemas.session import Session, session_from_metadata
 
 
 def check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:
-    """Raise MissingMetadataError unless ``metadata`` holds a session with a camera calibration."""
+    """Raise MissingMetadataError unless ``metadata`` holds a session whose camera, if it has one,
+    is calibrated (a session without a camera takes its bearings from ``/sensor/bearings``)."""
     record = metadata.get(SESSION_METADATA_NAME)
     if record is None:
         raise MissingMetadataError(
@@ -57,6 +58,8 @@ def check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:
         doc = json.loads(record.get("json", "null"))
     except json.JSONDecodeError:
         return  # session_from_metadata names this problem
+    if isinstance(doc, dict) and "camera" not in doc:
+        return
     camera = doc.get("camera") if isinstance(doc, dict) else None
     if not isinstance(camera, dict) or "calibration" not in camera:
         raise MissingMetadataError(

@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 from importing import on, read_back
 
+from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogReader
 from replay.cli import cli
 
@@ -114,6 +115,9 @@ def test_session_without_camera_opens_with_names_as_classes(tmp_path: Path) -> N
     assert session.truth_landmarks_m() == {"A": (0, 0), "B": (2, 0), "C": (1, 1.5)}
     info = CliRunner().invoke(cli, ["info", str(tmp_path / "log.mcap")])
     assert "camera: none" in info.output and "imported by the csv importer" in info.output
+    # a log without a camera opens for processing (its bearings are not in frames)
+    with ProcessableLog(tmp_path / "log.mcap") as log:
+        assert set(log.topics) == {"/sensor/bearings", "/robot/odometry_pose"}
 
 
 @pytest.mark.parametrize(
