@@ -12,12 +12,16 @@ import math
 from functools import cache
 from typing import TYPE_CHECKING, Any
 
-from data_schemas.errors import SchemaError
+from data_schemas.errors import BslamError, SchemaError
 from data_schemas.quick_check import conforms
 from data_schemas.registry import schema_dict, topic
 
 if TYPE_CHECKING:
     import jsonschema
+
+#: How deep a JSON document or message may nest (objects and arrays). Ours nest 5 deep at most;
+#: Python's parser and the validators recurse, so a deeper document is refused before them.
+MAX_JSON_DEPTH = 64
 
 
 @cache
@@ -165,12 +169,46 @@ def encode(topic_name: str, msg: dict[str, Any], *, check: bool = True) -> bytes
     return json.dumps(msg, separators=(",", ":")).encode()
 
 
+def loads(text: str | bytes, *, what: str, error: type[BslamError] = SchemaError) -> Any:
+    """Parse a JSON document or message that came from outside (a file, a log).
+
+    Raises ``error`` (one line naming ``what``) for text that is not JSON or nests deeper than
+    :data:`MAX_JSON_DEPTH`; never RecursionError.
+    """
+    deep = f"{what}: nests deeper than {MAX_JSON_DEPTH} levels"
+    try:
+        doc = json.loads(text)
+    except UnicodeDecodeError as exc:
+        raise error(f"{what}: not UTF-8 text ({exc.reason})") from None
+    except json.JSONDecodeError as exc:
+        where = f"line {exc.lineno}, column {exc.colno}"
+        raise error(f"{what}: not valid JSON ({where}: {exc.msg})") from None
+    except RecursionError:
+        raise error(deep) from None
+    if _too_deep(doc):
+        raise error(deep)
+    return doc
+
+
+def _too_deep(doc: Any) -> bool:
+    """``doc`` nests more than MAX_JSON_DEPTH objects and arrays (walked without recursion)."""
+    level = [doc]
+    for _ in range(MAX_JSON_DEPTH):
+        level = [
+            v
+            for x in level
+            if isinstance(x, dict | list)
+            for v in (x.values() if isinstance(x, dict) else x)
+            if isinstance(v, dict | list)
+        ]
+        if not level:
+            return False
+    return True
+
+
 def decode(topic_name: str, data: bytes, *, check: bool = False) -> dict[str, Any]:
     """Parse JSON message bytes of ``topic_name``; validate them too if ``check``."""
-    try:
-        msg = json.loads(data)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise SchemaError(f"{topic_name}: message is not valid JSON ({exc})") from None
+    msg = loads(data, what=topic_name)
     if not isinstance(msg, dict):
         raise SchemaError(f"{topic_name}: message is not a JSON object")
     if check:

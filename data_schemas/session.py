@@ -15,7 +15,7 @@ from typing import Any
 
 from data_schemas.calibration import Calibration, calibration_from_dict
 from data_schemas.catalog import catalog_problem
-from data_schemas.codec import validate
+from data_schemas.codec import loads, validate
 from data_schemas.colors import appearance_problem, class_label
 from data_schemas.errors import MissingMetadataError, SchemaError
 
@@ -182,10 +182,7 @@ def session_from_metadata(metadata: dict[str, str]) -> Session:
     text = metadata.get("json")
     if text is None:
         raise MissingMetadataError("session metadata record has no 'json' key")
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise MissingMetadataError(f"session metadata is not valid JSON ({exc})") from None
+    doc = loads(text, what="session metadata", error=MissingMetadataError)
     if not isinstance(doc, dict):
         raise MissingMetadataError("session metadata is not a JSON object")
     return session_from_doc(doc)

@@ -6,7 +6,9 @@ read with this shallow check instead: it is compiled once per schema from the sc
 schema names. What it finds is one :class:`~data_schemas.errors.SchemaError` line naming the
 topic, the log time and the field, e.g.
 ``/robot/movement at log time 1700000000.100000000 s: field 'phase' is missing``.
-Bounds (``minimum``, string lengths, array sizes) are left to full validation on write.
+Integers are held to their schema's ``minimum`` and ``maximum`` and always to 64 bits (a
+movement index of 10**30 never reaches GTSAM); other bounds (string lengths, array sizes,
+numbers) are left to full validation on write.
 """
 
 from __future__ import annotations
@@ -43,6 +45,28 @@ _ARTICLE = {
 }
 
 
+#: Integers a message may hold without a tighter bound in its schema (signed 64 bits).
+INT64 = (-(2**63), 2**63 - 1)
+
+
+def brief(value: int) -> str:
+    """An integer for an error message: digits, or how many there are (a 309-digit number)."""
+    text = str(value)
+    return text if len(text) <= 24 else f"a {len(text.lstrip('-'))}-digit number"
+
+
+def _integer_range(schema: dict[str, Any], path: str) -> Check:
+    low = max(schema.get("minimum", INT64[0]), INT64[0])
+    high = min(schema.get("maximum", INT64[1]), INT64[1])
+
+    def check_range(v: Any) -> tuple[str, str] | None:
+        if not isinstance(v, int) or low <= v <= high:
+            return None
+        return path, f"should be in [{low}, {high}], got {brief(v)}"
+
+    return check_range
+
+
 def _join(prefix: str, key: str) -> str:
     return f"{prefix}.{key}" if prefix else key
 
@@ -62,6 +86,8 @@ def _compile(schema: dict[str, Any], path: str) -> Check | None:
             )
 
         checks.append(check_type)
+    if kind == "integer":
+        checks.append(_integer_range(schema, path))
     choices = schema.get("enum", [schema["const"]] if "const" in schema else None)
     if choices is not None:
 

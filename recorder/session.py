@@ -3,7 +3,6 @@ calibration and landmark files ``bslam record`` reads to build it."""
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import uuid
@@ -12,8 +11,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from data_schemas.calibration import Calibration, calibration_from_dict, pinhole_from_camera_info
-from data_schemas.codec import validate
+from data_schemas.codec import loads, validate
 from data_schemas.errors import BslamError, CalibrationError, SchemaError
+from data_schemas.inputs import read_text
 from data_schemas.mcap.writer import software_version
 from data_schemas.registry import ImageEncoding
 from data_schemas.session import (
@@ -113,13 +113,8 @@ def build_session_doc(
 
 
 def _read_json(path: str | os.PathLike[str], what: str) -> Any:
-    try:
-        with open(path, encoding="utf-8") as f:
-            return json.load(f)
-    except OSError as exc:
-        raise BslamError(f"cannot read {what} file {os.fspath(path)}: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise BslamError(f"{what} file {os.fspath(path)} is not valid JSON ({exc})") from None
+    text = read_text(path, what=f"{what} file", error=BslamError)
+    return loads(text, what=f"{what} file {os.fspath(path)}", error=BslamError)
 
 
 def load_calibration_file(path: str | os.PathLike[str]) -> Calibration:

@@ -23,6 +23,7 @@ import struct
 import time
 import zlib
 from collections.abc import Callable, Iterator
+from dataclasses import replace
 from typing import Literal, NamedTuple
 
 from isal import isal_zlib
@@ -33,8 +34,11 @@ from mcap.records import Channel, Chunk, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, breakup_chunk
 
 from data_schemas.closing import Closing
-from data_schemas.errors import LogError, NotMcapError
+from data_schemas.errors import CorruptLogError, LogError, NotMcapError, recover_hint
+from data_schemas.inputs import open_fd
+from data_schemas.mcap.compression import MAX_CHUNK_BYTES, decompress
 from data_schemas.mcap.layout import MAGIC, RECORD_HEADER
+from data_schemas.shape import brief
 
 #: Chunk body up to its compression name: start and end time, records size, CRC, name length;
 #: the records' length (u64) follows the name.
@@ -47,6 +51,8 @@ FollowEnd = Literal["finished", "idle"]
 #: Default seconds without growth before following stops (the recorder closes a chunk at least
 #: every 0.5 s while it writes, and it writes while the robot moves or is polled).
 IDLE_TIMEOUT_S = 10.0
+#: The largest chunk or metadata record read whole (bytes): a chunk's limit and its header.
+MAX_RECORD_BYTES = MAX_CHUNK_BYTES + 4096
 
 
 class FollowedMessage(NamedTuple):
@@ -178,7 +184,9 @@ class LogFollower(Closing):
         deadline = self._now() + self._appear_s
         while True:
             try:
-                self._fd = os.open(self.name, os.O_RDONLY)
+                # a FIFO opens at once (no wait for a writer); it never grows, so the idle
+                # time-out ends the follow
+                self._fd = open_fd(self.name, what="log", error=LogError, fifo=True)
                 break
             except FileNotFoundError:
                 if self._now() >= deadline:
@@ -232,6 +240,11 @@ class LogFollower(Closing):
             if opcode == Opcode.FOOTER:
                 self.end = "finished"
                 return None
+            if opcode in (Opcode.CHUNK, Opcode.METADATA) and length > MAX_RECORD_BYTES:
+                raise CorruptLogError(
+                    f"{self.name}: a record at byte {self._pos} states {brief(length)} bytes, "
+                    f"over the limit of {MAX_RECORD_BYTES}; {recover_hint(self.name)}"
+                )
             if not self._wait_for(start + length):
                 return None
             self._pos = start + length
@@ -243,8 +256,10 @@ class LogFollower(Closing):
         at = self._pos - len(body) - RECORD_HEADER.size
         try:
             records = _stored_records(body)
-            if records is None:  # a compressed chunk (another writer): mcap's reader
-                records = breakup_chunk(Chunk.read(ReadDataStream(io.BytesIO(body))), True)
+            if records is None:  # a compressed chunk: decompressed within its limits
+                chunk = Chunk.read(ReadDataStream(io.BytesIO(body)))
+                unpacked = decompress(chunk.compression, chunk.data, chunk.uncompressed_size)
+                records = breakup_chunk(replace(chunk, compression="", data=unpacked), True)
         except (McapError, CRCValidationError, struct.error, zlib.error, ValueError) as exc:
             raise LogError(
                 f"{self.name}: the chunk at byte {at} is damaged ({exc}); the chunks before it "

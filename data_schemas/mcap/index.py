@@ -68,6 +68,8 @@ _Entry = tuple[int, int, int]
 _Head = tuple[int, int, int, int, int]
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
+#: The records a chunk may hold (MCAP specification).
+_IN_CHUNK = frozenset({Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE})
 
 
 class DamagedLogError(McapError):
@@ -410,5 +412,7 @@ def _walk(records: bytes | memoryview) -> tuple[dict[int, _Head], bool]:
                 break
             head = MESSAGE_HEADER.unpack_from(records, pos)
             heads[pos] = head[1:]
+        elif opcode not in _IN_CHUNK:
+            break  # a chunk holds schemas, channels and messages only
         pos += RECORD_HEADER.size + length
     return heads, pos == stop

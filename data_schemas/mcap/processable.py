@@ -16,7 +16,6 @@ beside ours) are ignored, with a note in :attr:`ProcessableLog.notes`.
 
 from __future__ import annotations
 
-import json
 import os
 import struct
 from collections.abc import Collection, Container, Iterator
@@ -30,14 +29,17 @@ from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 
 from data_schemas.closing import Closing
+from data_schemas.codec import loads
 from data_schemas.errors import (
     CorruptLogError,
     LogError,
     MissingMetadataError,
+    SchemaError,
     UnfinishedLogError,
     UnknownSchemaError,
     recover_hint,
 )
+from data_schemas.inputs import open_input
 from data_schemas.mcap.index import CorruptChunksError, DamagedLogError, LogIndex, MessageFields
 from data_schemas.mcap.read import LogMessage, corrupt_log_line, corruption
 from data_schemas.mcap.scan import Damage, LogScan
@@ -55,8 +57,8 @@ def check_calibration(name: str, metadata: dict[str, dict[str, str]]) -> None:
             "(not a bearing-slam recording?)"
         )
     try:
-        doc = json.loads(record.get("json", "null"))
-    except json.JSONDecodeError:
+        doc = loads(record.get("json", "null"), what="session metadata")
+    except SchemaError:
         return  # session_from_metadata names this problem
     if isinstance(doc, dict) and "camera" not in doc:
         return
@@ -143,10 +145,7 @@ class ProcessableLog(Closing):
         self.notes: list[str] = []
         self.skipped: list[Damage] = []
         self._skip = skip_corrupt
-        try:
-            self._file: IO[bytes] = open(self.path, "rb")  # noqa: SIM115 (closed in close)
-        except OSError as exc:
-            raise LogError(f"cannot open log {self.path}: {exc.strerror}") from None
+        self._file: IO[bytes] = open_input(self.path, what="log", error=LogError)
         self._index: LogIndex | None = None
         try:
             self._open(skip_corrupt)

@@ -52,6 +52,7 @@ from mcap.records import (
 
 from data_schemas.closing import Closing
 from data_schemas.errors import LogError, NotMcapError
+from data_schemas.inputs import open_input
 from data_schemas.mcap.compression import COMPRESSIONS, DecompressionError, decompress
 from data_schemas.mcap.layout import (
     CHUNK_FIELDS,
@@ -211,7 +212,7 @@ class LogScan(Closing):
         else:
             self.name = os.fspath(source)
             try:
-                with open(self.name, "rb") as file:
+                with open_input(self.name, what="log", error=LogError) as file:
                     size = os.fstat(file.fileno()).st_size
                     self._data = (
                         mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ) if size else b""
@@ -590,6 +591,8 @@ class LogScan(Closing):
                 seen.setdefault(message.channel_id, []).append((message.log_time, pos - start))
             elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
                 yield from self._definition(_parse(opcode, bytes(data[body:end])))  # type: ignore[arg-type]
+            else:  # a chunk holds schemas, channels and messages only (32 MiB of zeros: not)
+                raise ValueError(f"a record of type {opcode:#04x} inside a chunk")
             pos = end
 
     def _message_index(self, pos: int, body: int, stop: int) -> None:

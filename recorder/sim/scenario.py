@@ -56,9 +56,10 @@ from data_schemas.calibration import (
     default_omni,
 )
 from data_schemas.catalog import catalog_problem
-from data_schemas.codec import validate
+from data_schemas.codec import loads, validate
 from data_schemas.colors import appearance_problem
 from data_schemas.errors import CalibrationError, ScenarioError, SchemaError
+from data_schemas.inputs import read_text
 from data_schemas.registry import schema_dict
 from data_schemas.session import LandmarkSpec, shared_reference_problem
 from recorder.moves import Move
@@ -268,18 +269,10 @@ def load_scenario(path: str | Path) -> Scenario:
         One line naming the file and the offending key.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ScenarioError(f"scenario file {str(p)!r} does not exist") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"cannot read scenario file {str(p)!r}: {exc}") from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ScenarioError(
-            f"scenario {p.name}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
-        ) from None
+    if not p.exists() and not p.is_symlink():
+        raise ScenarioError(f"scenario file {str(p)!r} does not exist")
+    text = read_text(p, what="scenario file", error=ScenarioError)
+    doc = loads(text, what=f"scenario {p.name}", error=ScenarioError)
     return scenario_from_dict(doc, what=f"scenario {p.name}")
 
 
