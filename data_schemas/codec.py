@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from functools import cache
 from typing import TYPE_CHECKING, Any
 
@@ -22,6 +23,8 @@ if TYPE_CHECKING:
 #: How deep a JSON document or message may nest (objects and arrays). Ours nest 5 deep at most;
 #: Python's parser and the validators recurse, so a deeper document is refused before them.
 MAX_JSON_DEPTH = 64
+#: Digits of a number too long to print in an error message (10**308 has 309).
+_LONG_NUMBER = re.compile(r"\d{25,}")
 
 
 @cache
@@ -61,14 +64,15 @@ def validate(schema_name: str, doc: Any, *, what: str | None = None) -> None:
     SchemaError
         One line naming ``what`` and the offending field.
     """
+    require_finite(doc, what or schema_name)
     if conforms(_schema(schema_name), doc) is not True:
         from jsonschema.exceptions import best_match
 
         error = best_match(_validator(schema_name).iter_errors(doc))
         if error is not None:
             field, message = _explain(error)
+            message = _LONG_NUMBER.sub(lambda m: f"a {len(m[0])}-digit number", message)
             raise SchemaError(f"{what or schema_name}: field {field!r}: {message}")
-    require_finite(doc, what or schema_name)
 
 
 def _explain(error: jsonschema.ValidationError) -> tuple[str, str]:
