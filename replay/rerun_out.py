@@ -7,14 +7,13 @@ import os
 import socket
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal
 from urllib.parse import quote, urlsplit
 
 import rerun as rr
 
 from data_schemas.errors import BslamError
-from data_schemas.outputs import OutputGuard
+from data_schemas.outputs import OutputGuard, pipe_into
 from replay.blueprint import method_blueprint
 from replay.follow import FollowedLog
 from replay.process import open_log, process_log
@@ -218,10 +217,15 @@ def save_rrd(
             if isinstance(log, str | os.PathLike)
             else log
         )  # a bad log fails here, before any output exists
-        part = Path(rrd) if followed else stack.enter_context(guard.staged(rrd))
-        rec, _ = open_recording(
-            recording_id(opened), RerunTarget("save", os.fspath(part)), live=followed
+        # Rerun only logs a failed write: it writes into a pipe, and every write to the file
+        # is ours (checked, then fsynced before the file is renamed into place)
+        stream = (
+            stack.enter_context(open(rrd, "wb"))
+            if followed
+            else stack.enter_context(guard.writing(rrd))
         )
+        pipe = stack.enter_context(pipe_into(stream, what=f"Rerun recording {os.fspath(rrd)}"))
+        rec, _ = open_recording(recording_id(opened), RerunTarget("save", pipe), live=followed)
         try:
             return replay_log(opened, method, rec, force=force, live=followed, **kw)
         finally:

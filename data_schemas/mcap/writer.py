@@ -43,6 +43,7 @@ import pybase64
 from data_schemas.codec import validate
 from data_schemas.errors import DiskFullError, LogError, SchemaError, recover_hint
 from data_schemas.mcap.chunks import Bytes, McapChunkWriter
+from data_schemas.outputs import hold_writer_lock
 from data_schemas.registry import (
     IMAGE_SCHEMAS,
     MESSAGE_ENCODING,
@@ -145,6 +146,7 @@ class LogWriter:
                 self._stream: IO[bytes] = open(self._path, "wb")  # noqa: SIM115 (closed in finish)
             except OSError as exc:
                 raise LogError(f"cannot create log {self._path}: {exc.strerror}") from None
+            hold_writer_lock(self._stream.fileno())  # `bslam info`: "being recorded"
             self.name = self._path
         else:
             self._stream = output

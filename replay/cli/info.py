@@ -12,15 +12,27 @@ def info(log: str) -> None:
 
     Every chunk's CRC is checked. An unfinished log (the recording was interrupted) or a
     corrupt one is summarised as far as it reads, then the command exits 1 and suggests
-    `bslam recover`.
+    `bslam recover`. A log still being recorded (its recorder holds a lock on it) is
+    summarised as far as it is written, exit 0, with a pointer to `--follow`.
     """
+    import shlex
+
     from data_schemas.errors import CorruptLogError, UnfinishedLogError, recover_hint
     from data_schemas.mcap.info import log_summary, summary_lines
     from data_schemas.mcap.read import corrupt_log_line, corruption
+    from data_schemas.outputs import being_written
 
+    recording = being_written(log)  # the recorder's lock: before the scan reads the file
     s = log_summary(log)
-    for line in summary_lines(s):
+    lines = summary_lines(s)
+    if recording and s.state != "finished":
+        lines[0] = f"{s.name}: being recorded (unfinished until the recorder ends)"
+    for line in lines:
         click.echo(line)
+    if recording and s.state != "finished":
+        follow = shlex.join(["bslam", "process", "--follow", log])
+        click.echo(f"{s.name} is being recorded: watch it grow with `{follow}`", err=True)
+        return
     if s.state == "corrupt":
         raise CorruptLogError(corrupt_log_line(s.name, corruption(s.damage), recover_hint(s.name)))
     if s.state == "unfinished":

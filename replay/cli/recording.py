@@ -140,7 +140,9 @@ def run_recording(
     that can be made again, as the demo's): it is written beside ``out`` and renamed onto it
     when finished. Otherwise (a
     recording, whose log must be on disk as it grows) an existing ``out`` is moved aside to
-    ``NAME.old-N.mcap`` (``force`` only), never overwritten.
+    ``NAME.old-N.mcap`` (``force`` only), never overwritten, and the name is created
+    exclusively (:func:`data_schemas.outputs.create_new`: a second process given the same
+    ``out`` refuses).
 
     ``live``: a follower process shows the log as it grows (:class:`replay.live.LiveFollower`;
     the terminal view replaces the progress bar), reading the log at ``out`` itself (so a live
@@ -148,7 +150,7 @@ def run_recording(
     """
     from tqdm import tqdm
 
-    from data_schemas.outputs import OutputGuard, move_aside
+    from data_schemas.outputs import OutputGuard, create_new, move_aside
     from recorder.record import RecordingInterrupted
 
     guard = OutputGuard(inputs, force=force)
@@ -163,6 +165,7 @@ def run_recording(
             aside = move_aside(path)
             if aside is not None:
                 click.echo(f"moved the existing {os.fspath(out)} aside to {aside}", err=True)
+            stack.enter_context(create_new(path))  # the name is ours: no other writer
         follower = None
         if live is not None:
             from replay.live import LiveFollower
