@@ -147,6 +147,7 @@ def write_log(
             )
     if finish:
         writer.finish()
-    else:
+    else:  # what a killed recorder leaves: chunks on disk, no footer, its lock released
         writer.flush()
+        writer._stream.close()
     return path
