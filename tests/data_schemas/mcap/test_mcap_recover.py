@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from mcap.exceptions import EndOfFile
+from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, McapRecord, Message
@@ -69,6 +69,26 @@ def _library_records(data: bytes) -> Iterator[tuple[McapRecord, int]]:
             yield record, stream.tell()
     except (EndOfFile, struct.error):
         return
+
+
+def _read_until_damage(data: bytes) -> list[Msg]:
+    """The messages the mcap library reads, CRCs checked, from damaged bytes until it stops."""
+    topics: dict[int, str] = {}
+    out: list[Msg] = []
+    stream = io.BytesIO(data)
+    try:
+        for record in StreamReader(stream, emit_chunks=True, validate_crcs=True).records:
+            inner = (
+                breakup_chunk(record, validate_crc=True) if isinstance(record, Chunk) else [record]
+            )
+            for rec in inner:
+                if isinstance(rec, Channel):
+                    topics[rec.id] = rec.topic
+                elif isinstance(rec, Message):
+                    out.append((topics[rec.channel_id], rec.sequence, rec.log_time, rec.data))
+    except (McapError, ValueError, struct.error, KeyError, UnicodeDecodeError):
+        pass  # the library stops at the damage; what it read before counts
+    return out
 
 
 def _spans(data: bytes) -> list[tuple[Msg, int, int]]:
@@ -167,6 +187,9 @@ def test_one_flipped_byte_anywhere(finished: Path, tmp_path: Path) -> None:
         # chunk in another order); the one it hit (if any) comes back changed or not at all
         others = [m for m, start, end in spans if not start <= offset < end]
         assert sorted(m for m in got if m in set(others)) == sorted(others), offset
+        # and whatever the library itself reads from the damaged bytes is among them
+        library = _read_until_damage(bytes(damaged))
+        assert len(set(library) - set(got)) == 0 and len(library) <= len(got), offset
         assert len(others) <= len(got) <= len(spans), offset
         if offset >= first_chunk:
             assert report.damage
