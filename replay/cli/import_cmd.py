@@ -184,3 +184,51 @@ def import_mrclam(
 
     importer = MrclamImporter(Path(dataset_dir), robot, reference, vision_error_deg, barcodes)
     _run(importer, out, force)
+
+
+@import_group.command("rosbag")
+@click.argument("bag", type=click.Path())
+@click.option(
+    "--landmarks",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Landmark file, as for `bslam record`: colours or bands, reference pair, eps.",
+)
+@out_option
+@click.option("--image-topic", help="sensor_msgs/Image or CompressedImage [default: the only one].")
+@click.option("--camera-info-topic", help="sensor_msgs/CameraInfo [default: the only one].")
+@click.option("--odometry-topic", help="nav_msgs/Odometry [default: the only one].")
+@click.option(
+    "--calibration",
+    type=click.Path(dir_okay=False),
+    help="Camera calibration file instead of the bag's CameraInfo (bslam.Calibration JSON, "
+    "ROS camera_info YAML or OpenCV FileStorage).",
+)
+@force_option
+def import_rosbag(
+    bag: str,
+    landmarks: str,
+    out: str,
+    image_topic: str | None,
+    camera_info_topic: str | None,
+    odometry_topic: str | None,
+    calibration: str | None,
+    force: bool,
+) -> None:
+    """A ROS 2 bag folder (MCAP or .db3 storage; no ROS install needed): frames, the camera's
+    calibration and wheel odometry.
+
+    Frames are stored lossless (PNG); odometry becomes /robot/odometry_pose (x, y, yaw). Needs
+    the 'ros' extra (rosbags).
+    """
+    from replay.importers.rosbag import RosbagImporter
+
+    importer = RosbagImporter(
+        Path(bag),
+        Path(landmarks),
+        image_topic,
+        camera_info_topic,
+        odometry_topic,
+        None if calibration is None else Path(calibration),
+    )
+    _run(importer, out, force)

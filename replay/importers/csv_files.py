@@ -113,7 +113,8 @@ class CsvImporter:
         )
         bearings = read_bearings(self.bearings, set(catalog.names), source=self.bearings.name)
         odometry = read_odometry(self.odometry)
-        return ImportedLog(doc, in_time_order(odometry, bearings))
+        messages = in_time_order(odometry, bearings)
+        return ImportedLog(doc, messages, len(messages))
 
 
 def read_catalog(path: Path) -> Catalog:

@@ -138,7 +138,8 @@ class MrclamImporter:
         unseen = [n for n in landmarks if n not in counts]
         if unseen:
             notes.append(f"robot {self.robot} never sees {', '.join(unseen)}")
-        return ImportedLog(doc, in_time_order(odometry, bearings, truth_msgs), notes)
+        messages = in_time_order(odometry, bearings, truth_msgs)
+        return ImportedLog(doc, messages, len(messages), notes)
 
 
 def _fields(row: Row, n: int) -> None:

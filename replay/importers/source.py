@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import time
 import uuid
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -59,7 +59,8 @@ class SourceFile:
 
 @dataclass(frozen=True)
 class Message:
-    """One message of the imported log: sensor time (ns), topic, JSON document."""
+    """One message of the imported log: its log time (ns: when the source had it, the order of
+    the log), topic, JSON document (whose ``timestamp`` is the sensor time)."""
 
     t_ns: int
     topic: str
@@ -74,14 +75,17 @@ class ImportedLog:
     ----------
     session_doc : dict
         The session document (``bslam.Session``), validated.
-    messages : list of Message
-        Sorted by time (stable: a file's order is kept among equal times).
+    messages : iterable of Message
+        In log-time order (a list, or a generator that reads the source as it goes).
+    total : int
+        How many messages ``messages`` gives (for progress).
     notes : list of str
         What the importer left out or doubts (one line each), for the user.
     """
 
     session_doc: dict[str, Any]
-    messages: list[Message]
+    messages: Iterable[Message]
+    total: int
     notes: list[str] = field(default_factory=list)
 
 
@@ -111,12 +115,13 @@ def imported_session(
     importer_version: int,
     files: Sequence[SourceFile],
     options: dict[str, Any],
-    landmarks: Sequence[str],
+    landmarks: Sequence[str | dict[str, Any]],
     reference: tuple[str, str],
     vision_error_deg: float,
     truth: dict[str, Any] | None = None,
+    camera: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The session document of an imported log (no robot, no camera), validated.
+    """The session document of an imported log (no robot), validated.
 
     Parameters
     ----------
@@ -128,14 +133,19 @@ def imported_session(
         The files read (hashed here).
     options : dict
         The importer's settings, stored as given.
-    landmarks : sequence of str
-        Catalog names (known by name only: bearings come from ``/sensor/bearings``).
+    landmarks : sequence of str or dict
+        Catalog entries: a name (a landmark known by name only, in a session without a camera:
+        its bearings come from ``/sensor/bearings``) or a session catalog entry (colour or
+        bands, for a camera's frames).
     reference : (str, str)
         The reference pair L1, L2.
     vision_error_deg : float
         Bound eps on the bearing error, degrees.
     truth : dict, optional
         ``{"source": ..., "landmarks": [{"name", "x_m", "y_m"}]}``: evaluation only.
+    camera : dict, optional
+        The session's ``camera`` (source, calibration, encoding, frame rate) if frames are
+        imported.
     """
     doc: dict[str, Any] = {
         "schema_version": SCHEMA_VERSION,
@@ -143,7 +153,7 @@ def imported_session(
         "created_unix_ns": time.time_ns(),
         "session_id": uuid.uuid4().hex,
         "simulated": False,
-        "landmarks": [{"name": name} for name in landmarks],
+        "landmarks": [{"name": lm} if isinstance(lm, str) else lm for lm in landmarks],
         "reference": list(reference),
         "vision_error_deg": vision_error_deg,
         "provenance": {
@@ -155,6 +165,8 @@ def imported_session(
     }
     if truth is not None:
         doc["truth"] = truth
+    if camera is not None:
+        doc["camera"] = camera
     try:
         session_from_doc(doc, what=f"{kind} import")
     except BslamError as exc:

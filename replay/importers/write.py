@@ -70,7 +70,7 @@ def import_log(
     guard.claim(out, what="log")
     imported = importer.read()
     counts: dict[str, int] = {}
-    total = len(imported.messages)
+    total = imported.total
     clock = _SourceClock()
     with guard.staged(out) as tmp, LogWriter(tmp, imported.session_doc, clock=clock) as log:
         for done, msg in enumerate(imported.messages, start=1):
