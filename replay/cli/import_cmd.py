@@ -232,3 +232,55 @@ def import_rosbag(
         None if calibration is None else Path(calibration),
     )
     _run(importer, out, force)
+
+
+@import_group.command("images")
+@click.argument("folder", type=click.Path(file_okay=False))
+@click.option(
+    "--timestamps",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="CSV: file,t_s (an image of FOLDER and its capture time, seconds).",
+)
+@click.option(
+    "--calibration",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Camera calibration (bslam.Calibration JSON, ROS camera_info YAML or OpenCV FileStorage).",
+)
+@click.option(
+    "--landmarks",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Landmark file, as for `bslam record`: colours or bands, reference pair, eps.",
+)
+@click.option(
+    "--odometry",
+    type=click.Path(dir_okay=False),
+    help="Odometry CSV, as for `bslam import csv` (poses or velocities) [default: none].",
+)
+@out_option
+@force_option
+def import_images(
+    folder: str,
+    timestamps: str,
+    calibration: str,
+    landmarks: str,
+    odometry: str | None,
+    out: str,
+    force: bool,
+) -> None:
+    """A folder of images with a timestamps file, and optionally an odometry CSV.
+
+    Frames are stored lossless (PNG); greyscale images as three equal channels.
+    """
+    from replay.importers.images import ImageFolderImporter
+
+    importer = ImageFolderImporter(
+        Path(folder),
+        Path(timestamps),
+        Path(calibration),
+        Path(landmarks),
+        None if odometry is None else Path(odometry),
+    )
+    _run(importer, out, force)
