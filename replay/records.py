@@ -7,6 +7,7 @@ a sink never needs the estimator's internals.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, cast, get_args
@@ -49,6 +50,12 @@ class MethodConfig:
         Joint estimator: relative std of a prior on each movement's length from its driven
         distance (odometry, else the commanded distance); None leaves the lengths free.
         An expected summary without it was made with the lengths free (``replay.regress``).
+    keyframe_distance_m, keyframe_turn_deg : float or None
+        Driving logs: path length (m) and turning (deg) between keyframes (None: the driving
+        estimator's defaults, :mod:`pipeline.driving.keyframes`).
+    odometry_std_per_m, odometry_heading_std_per_rad : float or None
+        Driving logs: the wheel model's position std per metre of path and heading std per
+        radian turned (None: :mod:`pipeline.driving.odometry`'s defaults).
     """
 
     prior: str = defaults.PRIOR
@@ -58,6 +65,10 @@ class MethodConfig:
     estimator: str = defaults.ESTIMATOR
     turn_prior_deg: float | None = defaults.TURN_PRIOR_DEG
     distance_prior: float | None = defaults.DISTANCE_PRIOR_REL
+    keyframe_distance_m: float | None = None
+    keyframe_turn_deg: float | None = None
+    odometry_std_per_m: float | None = None
+    odometry_heading_std_per_rad: float | None = None
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:
@@ -70,6 +81,14 @@ class MethodConfig:
             raise EstimationError(f"turn prior std must be > 0 deg, got {self.turn_prior_deg}")
         if self.distance_prior is not None and not self.distance_prior > 0.0:
             raise EstimationError(f"distance prior std must be > 0, got {self.distance_prior}")
+        for what, v in (
+            ("keyframe distance", self.keyframe_distance_m),
+            ("keyframe turn", self.keyframe_turn_deg),
+            ("odometry std per metre", self.odometry_std_per_m),
+            ("odometry heading std per radian", self.odometry_heading_std_per_rad),
+        ):
+            if v is not None and not (math.isfinite(v) and v > 0.0):
+                raise EstimationError(f"{what} must be a finite number > 0, got {v}")
 
     @property
     def prior_name(self) -> PriorName:
@@ -206,6 +225,8 @@ class MovementRecord:
         naming to confirm the name; None where association did not run.
     also_placed : tuple of int
         Joint estimator: earlier movements that had to wait and entered the map with this one.
+    rays_fl : dict name -> (2, 2) float
+        Driving logs: each bearing of the keyframe as a segment in FL from where it was taken.
     """
 
     index: int
@@ -236,6 +257,7 @@ class MovementRecord:
     named_from: Mapping[str, Sequence[tuple[int, int, float]]] = field(default_factory=dict)
     doubtful_landmarks: Mapping[str, str] | None = None
     unconfirmed_landmarks: Mapping[str, str] | None = None
+    rays_fl: Mapping[str, NDArray[np.float64]] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -320,13 +342,21 @@ class RunInfo:
     method : MethodConfig
         Estimator settings.
     truth : Truth or None
-        Simulation truth, for simulated logs.
+        Simulation truth, for simulated logs (an imported log's outside reference).
+    driving : bool
+        A driving log (bearings and odometry): each movement record is a keyframe.
     """
 
     log_name: str
     session: Session
     method: MethodConfig
     truth: Truth | None
+    driving: bool = False
+
+    @property
+    def estimator(self) -> str:
+        """The estimator that makes the map: ``driving`` for a driving log, else the method's."""
+        return "driving" if self.driving else self.method.estimator
 
 
 class Sink(Protocol):

@@ -51,7 +51,7 @@ from replay.records import (
     RunInfo,
     Sink,
 )
-from replay.truth import Truth, truth_from_scenario
+from replay.truth import Truth, truth_from_scenario, truth_of_session
 
 CAMERA_TOPIC = "/camera/panorama"
 #: what the runner reads, in log order: frames, the movement plan, the simulator's truth
@@ -107,7 +107,7 @@ def decode_image(schema: str, msg: dict[str, Any]) -> tuple[NDArray[np.uint8], b
     return image, None
 
 
-def _estimate_records(estimates: Mapping[str, LandmarkEstimate]) -> dict[str, EstimateRecord]:
+def estimate_records(estimates: Mapping[str, LandmarkEstimate]) -> dict[str, EstimateRecord]:
     """A map's estimates as records: mean, covariance and closed 80% outline (FL)."""
     out = {}
     for name, e in estimates.items():
@@ -224,7 +224,7 @@ class Runner:
         if final is None:
             return
         changed = final.retracted or final.named_at_end
-        estimates = _estimate_records(self.slam.estimates) if changed else None
+        estimates = estimate_records(self.slam.estimates) if changed else None
         record = AssociationRecord(
             self.state.last_timestamp_ns,
             self.state.last_log_time_ns,
@@ -428,7 +428,7 @@ class Runner:
             particles_fl=dict(result.belief_fl) if ok else {},
             o1_fl=result.o1_fl if ok else None,
             o2_fl=result.o2_fl if ok else None,
-            estimates=_estimate_records(result.estimates),
+            estimates=estimate_records(result.estimates),
             truth_o1_world=self.plan.true_position(start.timestamp_ns),
             truth_o2_world=self.plan.true_position(end.timestamp_ns),
             **joint_fields(result),
@@ -443,7 +443,25 @@ def run_log(
     Each sink's ``finish`` is called, also after an error. A path is opened and closed here.
     """
     if not isinstance(log, str | os.PathLike):
-        Runner(log, method, sinks).run()
+        _run_one(log, method, sinks)
         return
     with ProcessableLog(log) as opened:
-        Runner(opened, method, sinks).run()
+        _run_one(opened, method, sinks)
+
+
+def _run_one(log: MessageLog, method: MethodConfig, sinks: Sequence[Sink]) -> None:
+    """Frames through :class:`Runner`; a log without a camera (bearings and odometry) through
+    :class:`replay.driving.DrivingRunner`."""
+    from replay.driving import DrivingRunner, check_topics
+    from replay.importers.source import BEARINGS_TOPIC
+
+    topics = getattr(log, "topics", None)  # None: a followed log, its channels still to come
+    if topics is not None:
+        check_topics(log.name, list(topics))
+    driving = log.session.calibration is None if topics is None else BEARINGS_TOPIC in topics
+    if not driving:
+        Runner(log, method, sinks).run()
+        return
+    truth = truth_of_session(log.session)
+    info = RunInfo(log.name, log.session, method, truth, driving=True)
+    DrivingRunner(log, method, sinks, info).run()

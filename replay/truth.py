@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from data_schemas.session import Session
 from pipeline.frame_change import to_fl
 
 
@@ -116,3 +117,16 @@ def truth_from_scenario(scenario: dict[str, object], reference: tuple[str, str])
     assert isinstance(entries, list)
     landmarks = {str(e["name"]): np.array([e["x"], e["y"]], np.float64) for e in entries}
     return Truth(landmarks, WorldToFL(landmarks[reference[0]], landmarks[reference[1]]))
+
+
+def truth_of_session(session: Session) -> Truth | None:
+    """The truth a log's session holds: a simulated scenario's landmarks, or the landmark
+    positions an imported session's outside reference measured (evaluation only); else None."""
+    if session.scenario:
+        return truth_from_scenario(session.scenario, session.reference)
+    measured = session.truth_landmarks_m()
+    if not measured or not all(r in measured for r in session.reference):
+        return None
+    landmarks = {n: np.array(p, np.float64) for n, p in measured.items()}
+    l1, l2 = session.reference
+    return Truth(landmarks, WorldToFL(landmarks[l1], landmarks[l2]))

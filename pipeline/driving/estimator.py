@@ -57,7 +57,8 @@ class DrivingOptions:
     wheel : WheelNoise
         Std of the odometry between keyframes.
     min_parallax_rad : float
-        Smallest angle between two rays that initializes a landmark.
+        Smallest angle between two rays that initializes a landmark (half of it once
+        ``max_rays`` rays wait; never under twice the bearing error bound).
     r_min_m, r_max_m : float
         Range bounds (m) of the initialization's prior.
     n_particles : int
@@ -66,6 +67,9 @@ class DrivingOptions:
         Single-bearing prior of the initialization.
     robust : bool
         Huber loss on the bearing factors.
+    min_rays : int
+        Rays of a landmark that must agree (within twice the bearing error bound) with its
+        two-view initialization before it enters the map.
     max_rays : int
         Rays kept per landmark not yet mapped (the oldest go first).
     relinearize_threshold : float
@@ -74,12 +78,13 @@ class DrivingOptions:
 
     keyframes: KeyframeRule = field(default_factory=KeyframeRule)
     wheel: WheelNoise = field(default_factory=WheelNoise)
-    min_parallax_rad: float = math.radians(10.0)
+    min_parallax_rad: float = math.radians(15.0)
     r_min_m: float = 0.1
     r_max_m: float = 30.0
     n_particles: int = 300
     prior: PriorName = "impartial"
     robust: bool = True
+    min_rays: int = 3
     max_rays: int = 40
     relinearize_threshold: float = 0.01
 
@@ -132,6 +137,46 @@ def _ray_world(pose: NDArray[np.float64], ray: Ray) -> tuple[NDArray[np.float64]
     return sensor, float(sensor[2]) + ray.bearing_rad
 
 
+#: Rounds of "keep the rays that agree with the point, fit the point to them" at entry.
+REFINE_ROUNDS = 3
+
+
+def _ray_error(
+    point_m: NDArray[np.float64], sensor: NDArray[np.float64], direction: float
+) -> float:
+    """Angle (rad) between a ray (sensor pose (3,), direction) and the direction to a point."""
+    to = math.atan2(point_m[1] - sensor[1], point_m[0] - sensor[0])
+    return abs(float(wrap_rad(to - direction)))
+
+
+def _least_squares_point(
+    point_m: NDArray[np.float64], rays: list[tuple[NDArray[np.float64], float]]
+) -> NDArray[np.float64]:
+    """The point (2,) that minimises the squared bearing errors of rays (sensor pose, direction),
+    by Gauss-Newton from ``point_m`` (a few steps; the start is kept if a step fails)."""
+    p = np.asarray(point_m, np.float64).copy()
+    for _ in range(5):
+        a = np.zeros((2, 2))
+        b = np.zeros(2)
+        for sensor, direction in rays:
+            dx, dy = p[0] - sensor[0], p[1] - sensor[1]
+            r2 = dx * dx + dy * dy
+            g = np.array([-dy, dx]) / r2  # d bearing / d point
+            e = float(wrap_rad(direction - math.atan2(dy, dx)))
+            a += np.outer(g, g)
+            b += g * e
+        try:
+            step = np.linalg.solve(a, b)
+        except np.linalg.LinAlgError:
+            return p
+        if not np.all(np.isfinite(step)):
+            return p
+        p = p + step
+        if float(step @ step) < 1e-12:
+            break
+    return p
+
+
 class DrivingSlam:
     """The driving robot's map (see the module doc).
 
@@ -182,6 +227,7 @@ class DrivingSlam:
         self._rays: dict[str, list[Ray]] = {}
         self.mapped: set[str] = set()
         self._noise: dict[float, gtsam.noiseModel.Base] = {}
+        self._finished = False
 
     # ---- input -------------------------------------------------------------------------
 
@@ -220,9 +266,10 @@ class DrivingSlam:
             self._resolve(self._prev[0], self._prev[1], before=False)
 
     def finish(self) -> list[KeyframeResult]:
-        """Close the last keyframe: its bearings enter the map (call once, at the end)."""
-        if not self._keyframes or (not self._window and not self._waiting_bearings):
+        """Close the last keyframe: its bearings enter the map (at the end; once)."""
+        if not self._keyframes or self._finished:
             return []
+        self._finished = True
         if self._prev is not None:
             self._resolve(self._prev[0] + 1, self._prev[1], before=True)
         return self._close(None)
@@ -333,7 +380,11 @@ class DrivingSlam:
         del earlier[: -self.options.max_rays]
         if best is None:
             return "one ray so far"
-        need = max(self.options.min_parallax_rad, 2.0 * self.eps_rad)
+        # a landmark seen from max_rays keyframes without the parallax (far, or on the line
+        # of motion) may enter with half of it: its many rays decide its range
+        patient = len(earlier) >= self.options.max_rays
+        need = self.options.min_parallax_rad * (0.5 if patient else 1.0)
+        need = max(need, 2.0 * self.eps_rad)
         if best[0] < need:
             return f"widest parallax {math.degrees(best[0]):.1f} deg < {math.degrees(need):.1f}"
         o = self.options
@@ -352,12 +403,24 @@ class DrivingSlam:
         if isinstance(particles, Degenerate):
             return particles.reason
         point = particles.mean(axis=0)
+        sensors = [_ray_world(self.pose_m(r.keyframe), r) for r in earlier]
+        for _ in range(REFINE_ROUNDS):  # the rays that agree with the point decide it
+            agree = [
+                i for i, sd in enumerate(sensors) if _ray_error(point, *sd) <= 2 * self.eps_rad
+            ]
+            if len(agree) < o.min_rays:
+                return f"{len(agree)} of {len(earlier)} rays agree with the two views' point"
+            point = _least_squares_point(point, [sensors[i] for i in agree])
+        agree = [i for i, sd in enumerate(sensors) if _ray_error(point, *sd) <= 2 * self.eps_rad]
+        if len(agree) < o.min_rays:
+            return f"{len(agree)} of {len(earlier)} rays agree with the rays' point"
         key = landmark_key(self.index[name])
         self._new_values.insert(key, point)
         self._new.push_back(weak_point_prior(key, point))
         self.mapped.add(name)
-        for r in self._rays.pop(name):
-            self._bearing(name, r)
+        del self._rays[name]
+        for i in agree:  # the others are taken for wrong detections
+            self._bearing(name, earlier[i])
         return np.asarray(point, np.float64)
 
     # ---- the map -----------------------------------------------------------------------

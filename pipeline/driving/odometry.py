@@ -51,11 +51,11 @@ def interpolate(
 
 
 #: Default std of each position component per metre of path (m/m).
-TRANS_STD_PER_M = 0.05
+TRANS_STD_PER_M = 0.1
 #: Default heading std per radian turned (rad/rad).
-ROT_STD_PER_RAD = 0.05
+ROT_STD_PER_RAD = 0.2
 #: Default heading std per metre driven (rad/m).
-ROT_STD_PER_M = 0.02
+ROT_STD_PER_M = 0.05
 #: Floors of the position (m) and heading (rad) stds.
 FLOOR_M = 1e-3
 FLOOR_RAD = 1e-3

@@ -51,6 +51,43 @@ distance_prior_option = click.option(
 )
 
 
+#: Options of the driving estimator (logs with bearings and odometry); None: its defaults.
+driving_method_options = [
+    click.option(
+        "--keyframe-distance",
+        "keyframe_distance_m",
+        type=FiniteFloat(min=0.0, min_open=True),
+        default=None,
+        metavar="M",
+        help="Driving logs: a keyframe every M metres of odometry path [default: 0.3].",
+    ),
+    click.option(
+        "--keyframe-turn",
+        "keyframe_turn_deg",
+        type=FiniteFloat(min=0.0, min_open=True),
+        default=None,
+        metavar="DEG",
+        help="Driving logs: or every DEG degrees of turning [default: 20].",
+    ),
+    click.option(
+        "--odometry-std",
+        "odometry_std_per_m",
+        type=FiniteFloat(min=0.0, min_open=True),
+        default=None,
+        metavar="M_PER_M",
+        help="Driving logs: odometry position std per metre of path [default: 0.05].",
+    ),
+    click.option(
+        "--odometry-heading-std",
+        "odometry_heading_std_per_rad",
+        type=FiniteFloat(min=0.0, min_open=True),
+        default=None,
+        metavar="RAD_PER_RAD",
+        help="Driving logs: odometry heading std per radian turned [default: 0.05].",
+    ),
+]
+
+
 def method_options(fn: click.decorators.FC) -> click.decorators.FC:
     """The estimator options shared by process, replay and demo."""
     for option in reversed(
@@ -94,6 +131,7 @@ def method_options(fn: click.decorators.FC) -> click.decorators.FC:
                 show_default=True,
                 help="Seed of the estimator's random generator.",
             ),
+            *driving_method_options,
         ]
     ):
         fn = option(fn)
@@ -174,6 +212,10 @@ def process(
     n_r: int,
     n_l: int,
     seed: int,
+    keyframe_distance_m: float | None,
+    keyframe_turn_deg: float | None,
+    odometry_std_per_m: float | None,
+    odometry_heading_std_per_rad: float | None,
     workers: int,
     scheduler: str | None,
     force: bool,
@@ -213,6 +255,10 @@ def process(
         estimator=estimator,
         turn_prior_deg=turn_prior_deg,
         distance_prior=distance_prior,
+        keyframe_distance_m=keyframe_distance_m,
+        keyframe_turn_deg=keyframe_turn_deg,
+        odometry_std_per_m=odometry_std_per_m,
+        odometry_heading_std_per_rad=odometry_heading_std_per_rad,
     )
     window = LogWindow(start, end)
     if follow and window:

@@ -78,6 +78,10 @@ def replay(
     n_r: int,
     n_l: int,
     seed: int,
+    keyframe_distance_m: float | None,
+    keyframe_turn_deg: float | None,
+    odometry_std_per_m: float | None,
+    odometry_heading_std_per_rad: float | None,
     follow: bool,
     idle_timeout: float,
 ) -> None:
@@ -139,6 +143,10 @@ def replay(
         estimator=estimator,
         turn_prior_deg=turn_prior_deg,
         distance_prior=distance_prior,
+        keyframe_distance_m=keyframe_distance_m,
+        keyframe_turn_deg=keyframe_turn_deg,
+        odometry_std_per_m=odometry_std_per_m,
+        odometry_heading_std_per_rad=odometry_heading_std_per_rad,
     )
     with show_skips():
         # a bad log fails here, before any output exists

@@ -179,7 +179,7 @@ class DerivedLogSink:
             "timestamp": stamp,
             "index": record.index,
             "status": record.status,
-            "estimator": self._run.method.estimator,
+            "estimator": self._run.estimator,
             "skipped_landmarks": [
                 {"name": n, "reason": r} for n, r in record.skipped_landmarks.items()
             ],

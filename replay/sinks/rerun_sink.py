@@ -174,7 +174,7 @@ class RerunSink:
         self._rgb = landmark_rgb(s)
         log_fig1(self.rec, s.vision_error_rad)
         log = self.rec.log
-        log("log", rr.TextLog(f"map made by the {run.method.estimator} estimator", level="INFO"))
+        log("log", rr.TextLog(f"map made by the {run.estimator} estimator", level="INFO"))
         log("fr", Y_UP, static=True)
         log("map", Y_UP, static=True)
         classes = [rr.ClassDescription(info=(0, "background", (0, 0, 0)))]
@@ -375,7 +375,7 @@ class RerunSink:
                 f"map/particles/{name}",
                 rr.Points2D(particles, colors=[self._rgb[name]], radii=rr.Radius.ui_points(1.5)),
             )
-        if run.method.estimator == "joint":
+        if run.estimator == "joint":
             # its initializer's belief stops with the landmark's entry in the map
             for name in record.estimates.keys() - record.particles_fl.keys():
                 log(f"map/particles/{name}", rr.Clear(recursive=False))
@@ -393,6 +393,17 @@ class RerunSink:
                 f"(movements {moves[0]}-{moves[-1]})"
             )
             log("log", rr.TextLog(text, level="INFO"))
+        if record.rays_fl:
+            measured = list(record.rays_fl)
+            log(
+                "map/rays",
+                rr.LineStrips2D(
+                    [record.rays_fl[n] for n in measured],
+                    colors=[self._rgb[n] for n in measured],
+                    radii=rr.Radius.ui_points(0.75),
+                    labels=measured,
+                ),
+            )
         if record.o1_fl is not None and record.o2_fl is not None:
             log(
                 "map/observation_particles",

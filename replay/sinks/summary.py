@@ -72,6 +72,19 @@ def _estimate(e: EstimateRecord) -> dict[str, Any]:
     return {"mean": _xy(e.mean_fl), "cov": [_xy(c[0]), _xy(c[1])]}
 
 
+def _method(run: RunInfo) -> dict[str, Any]:
+    """The ``method`` block: the run's settings (a driving log's: the driving estimator's)."""
+    doc = run.method.summary(run.session.vision_error_rad)
+    if run.driving:
+        from replay.driving import driving_summary
+
+        doc = {
+            k: v for k, v in doc.items() if k not in ("n_r", "n_l", "distance_prior")
+        } | driving_summary(run.method)
+        doc["estimator"] = "driving"
+    return doc
+
+
 class SummarySink:
     """Builds the summary document; read it from :attr:`document` after ``finish``."""
 
@@ -100,7 +113,7 @@ class SummarySink:
         self.document = {
             "log": run.log_name,
             "frame": {"origin": s.reference[0], "x_axis": s.reference[1]},
-            "method": run.method.summary(s.vision_error_rad),
+            "method": _method(run),
             "camera_model": None if s.calibration is None else s.calibration.model,
             "simulated": s.simulated,
             "movements": [],

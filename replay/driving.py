@@ -1,0 +1,230 @@
+"""A driving robot's log through the driving estimator to the sinks.
+
+A log whose session has no camera carries its bearings on ``/sensor/bearings`` and its wheel
+odometry on ``/robot/odometry_pose`` (``bslam import``, ``bslam simulate`` of a driving
+scenario). :class:`DrivingRunner` reads them, with the truth (``/sim/ground_truth``,
+``/truth/robot_pose``) when the log has it, in one pass in log order, feeds
+:class:`pipeline.driving.estimator.DrivingSlam`, and hands the sinks the records they already
+know: each keyframe is a :class:`~replay.records.FrameRecord` (its bearings) and, with the next
+keyframe, a :class:`~replay.records.MovementRecord` (``o1_fl``, ``o2_fl``: the two keyframes in
+FL; ``rays_fl``: its bearings as rays; ``estimates``: the map). The map is in FL once both
+reference landmarks are mapped (before that the records carry no FL positions); the last
+record's estimates carry iSAM2's marginal covariances (the others none: marginals cost).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.errors import EstimationError
+from data_schemas.stamps import ns_from_stamp
+from pipeline.bearings import Detection
+from pipeline.driving.estimator import DrivingOptions, DrivingSlam, KeyframeResult
+from pipeline.driving.odometry import compose
+from replay.importers.source import BEARINGS_TOPIC, ODOMETRY_POSE_TOPIC, TRUTH_POSE_TOPIC
+from replay.plan import TRUTH_TOPIC, MovementPlan
+from replay.records import FrameRecord, MethodConfig, MovementRecord, RunInfo, Sink
+from replay.stages import CAMERA_TOPIC, MessageLog, estimate_records
+
+#: the robot's true pose: the simulator's, or an imported log's outside reference
+TRUTH_POSE_TOPICS = (TRUTH_TOPIC, TRUTH_POSE_TOPIC)
+DRIVING_TOPICS = (BEARINGS_TOPIC, ODOMETRY_POSE_TOPIC, *TRUTH_POSE_TOPICS)
+#: Length (FL) of a ray drawn towards a landmark not in the map yet.
+RAY_FL = 1.5
+#: Keyframes between two progress lines on the ``bslam.replay`` logger (INFO).
+PROGRESS_EVERY = 100
+
+logger = logging.getLogger("bslam.replay")
+
+
+def check_topics(name: str, topics: Sequence[str]) -> None:
+    """Raise EstimationError unless a log with these topics has something to map.
+
+    A log needs frames (``/camera/panorama``) or bearings with odometry.
+    """
+    if CAMERA_TOPIC in topics:
+        return
+    if BEARINGS_TOPIC not in topics:
+        raise EstimationError(
+            f"{name}: neither frames ({CAMERA_TOPIC}) nor bearings ({BEARINGS_TOPIC}): "
+            "nothing to map; record with a camera, or import bearings (bslam import)"
+        )
+    if ODOMETRY_POSE_TOPIC not in topics:
+        raise EstimationError(
+            f"{name}: bearings without odometry ({ODOMETRY_POSE_TOPIC}): a driving robot's map "
+            "needs its odometry; import it with the bearings (bslam import)"
+        )
+
+
+def driving_options(method: MethodConfig) -> DrivingOptions:
+    """The estimator's options from a run's method (None fields keep the estimator's defaults)."""
+    base = DrivingOptions()
+    rule = base.keyframes
+    if method.keyframe_distance_m is not None:
+        rule = replace(rule, distance_m=method.keyframe_distance_m)
+    if method.keyframe_turn_deg is not None:
+        rule = replace(rule, turn_rad=math.radians(method.keyframe_turn_deg))
+    wheel = base.wheel
+    if method.odometry_std_per_m is not None:
+        wheel = replace(wheel, trans_std_per_m=method.odometry_std_per_m)
+    if method.odometry_heading_std_per_rad is not None:
+        wheel = replace(wheel, rot_std_per_rad=method.odometry_heading_std_per_rad)
+    return replace(base, keyframes=rule, wheel=wheel, prior=method.prior_name)
+
+
+def _detections(names: Sequence[str], r: KeyframeResult) -> dict[str, Detection]:
+    """A keyframe's bearings as detections of every catalog landmark."""
+    out = {}
+    for name in names:
+        ray = r.rays.get(name)
+        if ray is None:
+            out[name] = Detection(name, False, None, 0.0, 0.0, 0, 0, "not measured")
+        else:
+            out[name] = Detection(name, True, ray.bearing_rad, 0.0, 1.0, 0, 1, "")
+    return out
+
+
+class DrivingRunner:
+    """One driving log through :class:`DrivingSlam` to the sinks (see the module doc)."""
+
+    def __init__(
+        self, log: MessageLog, method: MethodConfig, sinks: Sequence[Sink], info: RunInfo
+    ) -> None:
+        if method.estimator == "paper":
+            raise EstimationError(
+                f"{log.name}: the paper's filter takes stop-and-go movements; a driving log "
+                "(bearings and odometry) is mapped by the driving estimator (--estimator joint)"
+            )
+        self.log = log
+        self.session = log.session
+        self.sinks = list(sinks)
+        self.info = info
+        self.slam = DrivingSlam(
+            self.session.landmark_names(),
+            self.session.reference,
+            vision_error_rad=self.session.vision_error_rad,
+            rng=np.random.default_rng(method.seed),
+            options=driving_options(method),
+        )
+        self.truth = MovementPlan()
+        self._held: MovementRecord | None = None
+        self._log_time_ns: dict[int, int] = {}
+
+    def run(self) -> None:
+        for sink in self.sinks:
+            sink.start(self.info)
+        try:
+            for msg in self.log.messages(DRIVING_TOPICS):
+                doc = msg.decode()
+                t_ns = ns_from_stamp(doc["timestamp"])
+                if msg.topic == ODOMETRY_POSE_TOPIC:
+                    pose = np.array([doc["x_m"], doc["y_m"], doc["theta_rad"]], np.float64)
+                    self._log_time_ns[t_ns] = msg.log_time_ns
+                    self._emit(self.slam.odometry(t_ns, pose))
+                elif msg.topic == BEARINGS_TOPIC:
+                    given = doc["bearings"]
+                    self.slam.bearings(
+                        t_ns,
+                        {b["landmark"]: float(b["bearing_rad"]) for b in given},
+                        {b["landmark"]: float(b["std_rad"]) for b in given if "std_rad" in b},
+                    )
+                else:
+                    self.truth.add(TRUTH_TOPIC, doc)
+            self._emit(self.slam.finish())
+            if self.slam.n_keyframes == 0:
+                raise EstimationError(
+                    f"{self.log.name}: no odometry on {ODOMETRY_POSE_TOPIC}: no keyframe to map"
+                )
+            self._flush(final=True)
+        finally:
+            for sink in self.sinks:
+                sink.finish()
+
+    def _emit(self, results: list[KeyframeResult]) -> None:
+        for r in results:
+            self._flush(final=False)
+            self._held = self._record(r)
+            if r.index % PROGRESS_EVERY == 0:
+                mapped = len(self.slam.mapped)
+                logger.info(
+                    "%s: keyframe %d, %d of %d landmarks mapped",
+                    self.log.name,
+                    r.index,
+                    mapped,
+                    len(self.slam.names),
+                )
+
+    def _flush(self, *, final: bool) -> None:
+        """Send the held record (the last one with the map's covariances)."""
+        record, self._held = self._held, None
+        if record is None:
+            return
+        if final:
+            estimates = self.slam.estimates(covariance=True)
+            record = replace(record, estimates=estimate_records(estimates))
+        for sink in self.sinks:
+            sink.movement(record)
+
+    def _record(self, r: KeyframeResult) -> MovementRecord:
+        names = self.slam.names
+        log_time_ns = self._log_time_ns.pop(r.t_ns, r.t_ns)
+        for t in [t for t in self._log_time_ns if t < r.t_ns]:
+            del self._log_time_ns[t]
+        frame = FrameRecord(r.t_ns, log_time_ns, (r.index, "start"), _detections(names, r))
+        for sink in self.sinks:
+            sink.frame(frame)
+        ends = self.slam.to_fl(np.array([r.pose_m[:2], r.next_pose_m[:2]]))
+        rays_fl = {} if ends is None else dict(self._rays_fl(r))
+        return MovementRecord(
+            index=r.index,
+            timestamp_ns=r.t_ns,
+            log_time_ns=log_time_ns,
+            status="ok",
+            bearings_rad={n: (ray.bearing_rad, None) for n, ray in r.rays.items()},
+            skipped_landmarks=dict(r.waiting),
+            o1_fl=None if ends is None else ends[:1],
+            o2_fl=None if ends is None else ends[1:],
+            estimates=estimate_records(self.slam.estimates()),
+            truth_o1_world=self.truth.true_position(r.t_ns),
+            truth_o2_world=self.truth.true_position(self.slam.keyframe_times_ns[-1]),
+            placement="odometry",
+            map_unit_m=self.slam.unit_m,
+            rays_fl=rays_fl,
+        )
+
+    def _rays_fl(self, r: KeyframeResult) -> Iterator[tuple[str, NDArray[np.float64]]]:
+        """Each bearing of the keyframe as a segment (2, 2) FL from its sensor: to the
+        landmark when mapped, else :data:`RAY_FL` long."""
+        points = self.slam.landmarks_m()
+        for name, ray in r.rays.items():
+            sensor = compose(r.pose_m, ray.offset)
+            a = float(sensor[2]) + ray.bearing_rad
+            start = self.slam.to_fl(sensor[:2])
+            assert start is not None
+            if name in points:
+                reach_m = float(np.hypot(*(points[name] - sensor[:2])))
+            else:
+                reach_m = RAY_FL * (self.slam.unit_m or 1.0)
+            end_m = sensor[:2] + reach_m * np.array([math.cos(a), math.sin(a)])
+            end = self.slam.to_fl(end_m)
+            assert end is not None
+            yield name, np.array([start, end])
+
+
+def driving_summary(method: MethodConfig) -> dict[str, Any]:
+    """The summary's ``method`` entries of the driving estimator: keyframe rule, wheel noise."""
+    o = driving_options(method)
+    return {
+        "keyframe_distance_m": o.keyframes.distance_m,
+        "keyframe_turn_deg": round(math.degrees(o.keyframes.turn_rad), 9),
+        "odometry_std_per_m": o.wheel.trans_std_per_m,
+        "odometry_heading_std_per_rad": o.wheel.rot_std_per_rad,
+        "odometry_heading_std_per_m": o.wheel.rot_std_per_m,
+    }
