@@ -456,12 +456,14 @@ def _run_one(log: MessageLog, method: MethodConfig, sinks: Sequence[Sink]) -> No
     from replay.importers.source import BEARINGS_TOPIC
 
     topics = getattr(log, "topics", None)  # None: a followed log, its channels still to come
-    if topics is not None:
-        check_topics(log.name, list(topics))
     driving = log.session.calibration is None if topics is None else BEARINGS_TOPIC in topics
     if not driving:
-        Runner(log, method, sinks).run()
+        Runner(log, method, sinks).run()  # its messages are checked (and refused) first
+        if topics is not None:
+            check_topics(log.name, list(topics))
         return
+    if topics is not None:
+        check_topics(log.name, list(topics))
     truth = truth_of_session(log.session)
     info = RunInfo(log.name, log.session, method, truth, driving=True)
     DrivingRunner(log, method, sinks, info).run()
