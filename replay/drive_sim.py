@@ -99,7 +99,8 @@ class SimulatedDrive:
         return ()
 
     def read(self) -> ImportedLog:
-        return ImportedLog(drive_session(self.run, self.vision_error_deg), drive_messages(self.run))
+        messages = drive_messages(self.run)
+        return ImportedLog(drive_session(self.run, self.vision_error_deg), messages, len(messages))
 
 
 def simulate_drive_log(

@@ -121,7 +121,7 @@ def _partial(tmp_path: Path, topics: set[str]) -> Path:
     run = simulate_drive(arenas()["few"], DrivingSpec(duration_s=5.0), np.random.default_rng(0))
     messages = [m for m in drive_messages(run) if m.topic in topics]
     path = tmp_path / "partial.mcap"
-    import_log(_Some(ImportedLog(drive_session(run, 2.0), messages)), path)
+    import_log(_Some(ImportedLog(drive_session(run, 2.0), messages, len(messages))), path)
     return path
 
 
