@@ -166,3 +166,27 @@ def test_baseline_priors_against_their_formulas() -> None:
     gx, gy = np.meshgrid(25.0 * x + 10.0, 3.0 * x, indexing="ij")
     dens = gaussian.density(np.column_stack((gx.ravel(), gy.ravel())), np.zeros(2), 0.0)
     assert float((25.0 * wx) @ dens.reshape(gx.shape) @ (3.0 * wx)) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_angular_density_and_its_draws_against_the_truncated_normal() -> None:
+    eps = math.radians(3.0)
+    s = 0.5 * eps  # the default std: half the error bound, cut at 2 std
+    prior = ImpartialPrior(eps)
+    peak = 1.0 / (s * math.sqrt(2.0 * math.pi) * math.erf(2.0 / math.sqrt(2.0)))
+    da = np.array([0.0, s, -s, eps, -eps, 1.0001 * eps])
+    want = peak * np.array([1.0, math.exp(-0.5), math.exp(-0.5), math.exp(-2.0), math.exp(-2.0), 0])
+    np.testing.assert_allclose(prior.g(da), want, rtol=1e-12)
+    # draws: the truncated normal's std, by the trapezoid rule on its density written out
+    x = np.linspace(-eps, eps, 20_001)
+    dens = np.exp(-0.5 * (x / s) ** 2)
+    std = math.sqrt(float(np.trapezoid(x * x * dens, x) / np.trapezoid(dens, x)))
+    draws = prior.sample_angle(200_000, np.random.default_rng(41))
+    assert np.abs(draws).max() <= eps
+    # 200k draws: the std's standard error is ~0.2 %
+    assert float(draws.std()) == pytest.approx(std, rel=0.01)
+    assert abs(float(draws.mean())) < 5 * std / math.sqrt(200_000)
+    flat = ImpartialPrior(eps, angular="uniform")
+    np.testing.assert_allclose(flat.g(da), [1 / (2 * eps)] * 5 + [0.0], rtol=1e-12)
+    assert float(flat.sample_angle(200_000, np.random.default_rng(42)).std()) == pytest.approx(
+        eps / math.sqrt(3.0), rel=0.01
+    )
