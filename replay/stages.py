@@ -30,7 +30,7 @@ import numpy as np
 import pybase64
 from numpy.typing import NDArray
 
-from data_schemas.errors import EstimationError, ImageError, MissingMetadataError
+from data_schemas.errors import EstimationError, ImageError, MissingMetadataError, SchemaError
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
 from data_schemas.registry import IMAGE_SCHEMA, image_encoding
@@ -251,7 +251,8 @@ class Runner:
             self._settle()
             self.state.pending = msg
             return
-        movement = self.plan.add(msg.topic, msg.decode())
+        doc = self._decoded(msg)
+        movement = None if doc is None else self.plan.add(msg.topic, doc)
         if movement is None:
             return
         index, phase, t_ns = movement
@@ -278,14 +279,30 @@ class Runner:
         if not keys and not self.all_frames:
             return
         self.state.last_log_time_ns, self.state.last_timestamp_ns = msg.log_time_ns, t_ns
-        doc = msg.decode()
+        doc = self._decoded(msg)
+        if doc is None:
+            return
         self._frame(msg.schema, doc, ns_from_stamp(doc["timestamp"]), msg.log_time_ns, keys)
+
+    def _decoded(self, msg: LogMessage) -> dict[str, Any] | None:
+        """The message's document; None, with one warning, for a message that does not decode
+        when the log is read with ``--skip-corrupt`` (else the SchemaError stops the run)."""
+        try:
+            return msg.decode()
+        except SchemaError as exc:
+            if not getattr(self.log, "skip_corrupt", False):
+                raise
+            logger.warning("%s: skipped a message that does not decode: %s", self.log.name, exc)
+            return None
 
     def _late_keyframe(self, index: int, phase: str, msg: LogMessage) -> None:
         """A movement message naming a frame handled before it (not the recorder's order)."""
         if index in self.state.done or (index, phase) in self.state.keyframes:
             return
-        image, _ = decode_image(msg.schema, msg.decode())
+        doc = self._decoded(msg)
+        if doc is None:
+            return
+        image, _ = decode_image(msg.schema, doc)
         detections = self.extractor.extract(image)
         self.state.keyframes[(index, phase)] = _Keyframe(
             msg.publish_time_ns, msg.log_time_ns, detections

@@ -1,4 +1,5 @@
-"""Hostile files for the fault-injection tests: bombs, lying chunks, deep nesting, mutations.
+"""Hostile files for the fault-injection tests (bombs, lying chunks, deep nesting, mutations),
+and :func:`run_bslam`, which runs a command on one in a process of its own.
 
 Built with the ``mcap`` library's record classes and ``zstandard``/``lz4`` directly, not with
 the project's writer, so a bug in our writer cannot hide the same bug in our reader.
@@ -6,7 +7,10 @@ the project's writer, so a bug in our writer cannot hide the same bug in our rea
 
 from __future__ import annotations
 
+import os
 import struct
+import subprocess
+import sys
 import zlib
 from pathlib import Path
 
@@ -25,6 +29,41 @@ from mcap.records import (
 )
 
 MAGIC = b"\x89MCAP0\r\n"
+ROOT = Path(__file__).resolve().parents[1]
+#: Runs a command with a file-size limit (SIGXFSZ ignored: a write fails with EFBIG) and
+#: prints its exit code and its peak memory (KiB), measured in this small launcher.
+LAUNCHER = """
+import resource, signal, subprocess, sys
+limit = int(sys.argv[1])
+def limited():
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    if limit:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+done = subprocess.run(sys.argv[2:], preexec_fn=limited)
+peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+print(done.returncode, peak, file=sys.stderr)
+"""
+
+
+def run_bslam(
+    *args: str | Path, limit: int = 0, cwd: Path | None = None, timeout: float = 60
+) -> tuple[int, list[str], int]:
+    """(exit code, stderr lines, peak MiB) of ``bslam args`` in a process of its own, with a
+    file-size limit of ``limit`` bytes (0: none)."""
+    done = subprocess.run(
+        [sys.executable, "-c", LAUNCHER, str(limit), sys.executable, "-m", "replay.cli"]
+        + [str(a) for a in args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=cwd,
+        # under a file-size limit Python would leave truncated bytecode behind (its own writes
+        # of __pycache__ ignore a short write)
+        env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"},
+    )
+    *lines, last = done.stderr.strip().splitlines()
+    code, peak_kib = (int(v) for v in last.split())
+    return code, [line for line in lines if line.strip()], peak_kib // 1024
 
 
 def _record(record: McapRecord) -> bytes:

@@ -153,6 +153,12 @@ class ProcessableLog(Closing):
             self.close()
             raise
 
+    @property
+    def skip_corrupt(self) -> bool:
+        """Opened with ``skip_corrupt``: damaged parts (and messages that do not decode) are
+        skipped with a warning instead of stopping the run."""
+        return self._skip
+
     def _open(self, skip_corrupt: bool) -> None:
         summary = _summary(self._file)
         self._index = self._checked_index(summary)

@@ -131,7 +131,9 @@ def recover_log(
             elif isinstance(record, Attachment):
                 writer.add_attachment(record)
                 attachments += 1
-        if messages == metadata == attachments == 0 and scan.damage:
+        if messages == metadata == attachments == 0 and (scan.damage or not scan.finished):
+            if not scan.damage:  # the magic bytes and nothing else, or a header alone
+                raise LogError(f"nothing readable in {scan.name}: it holds no records")
             raise LogError(
                 f"nothing readable in {scan.name}: "
                 + "; ".join(d.describe() for d in scan.damage[:3])

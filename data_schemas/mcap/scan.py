@@ -11,7 +11,8 @@ while it notes each damaged stretch of bytes as a :class:`Damage`:
   the damage are read as if nothing happened;
 * inside a corrupt or cut-off stored chunk every complete message record is salvaged, walking
   the records from the chunk's start and, where that walk breaks off, at the offsets its message
-  indexes give;
+  indexes give; a salvaged message of a JSON channel whose data does not parse (the damage
+  fell inside it) is dropped and counted (:attr:`Damage.dropped`);
 * records outside chunks (unchunked files), metadata and attachments are read wherever they lie;
   the summary section is read too (schemas and channels missing from the data section are taken
   from it) and its CRC checked.
@@ -23,6 +24,7 @@ each step moves forward in the file.
 from __future__ import annotations
 
 import io
+import json
 import mmap
 import os
 import re
@@ -110,7 +112,10 @@ class Damage:
     topics : set of str
         Topics of the messages it held (as far as known).
     kept : int
-        Messages salvaged from it (complete message records).
+        Messages salvaged from it (complete message records whose data decodes as their
+        channel's encoding).
+    dropped : int
+        Complete message records of it whose data does not decode (JSON channels): left out.
     expected : int or None
         Messages its message indexes list, None if they are not known.
     loses_data : bool
@@ -126,6 +131,7 @@ class Damage:
     end_ns: int | None = None
     topics: set[str] = field(default_factory=set)
     kept: int = 0
+    dropped: int = 0
     expected: int | None = None
     loses_data: bool = True
 
@@ -142,6 +148,8 @@ class Damage:
         if self.what in ("chunk", "cut chunk") and salvaged:
             total = "" if self.expected is None else f" of {self.expected}"
             text += f"; {self.kept}{total} messages salvaged"
+            if self.dropped:
+                text += f" ({self.dropped} more dropped: their data does not decode)"
         elif self.what in ("chunk", "cut chunk") and self.expected is not None:
             text += f"; {self.expected} messages"
         return text
@@ -670,6 +678,12 @@ class LogScan(Closing):
     def _salvaged(self, message: Message, damage: Damage) -> Iterator[Record]:
         if not self._salvage:
             return
+        channel = self.channels.get(message.channel_id) or self._summary_channels.get(
+            message.channel_id
+        )
+        if channel is not None and not _decodes(channel.message_encoding, message.data):
+            damage.dropped += 1  # a damaged byte inside the record: not a message to keep
+            return
         before = self.messages
         yield from self._admit(message)
         if self.messages == before:
@@ -737,6 +751,17 @@ class LogScan(Closing):
             self._data[records_at] in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE)
             and _U32.unpack_from(self._data, records_at - 12)[0] == 0
         )
+
+
+def _decodes(encoding: str, data: bytes) -> bool:
+    """Message ``data`` decodes as ``encoding`` (checked for JSON; other encodings: True)."""
+    if encoding != "json":
+        return True
+    try:
+        json.loads(data)
+    except (ValueError, RecursionError):  # UnicodeDecodeError and JSONDecodeError included
+        return False
+    return True
 
 
 def _message_at(data: bytes | mmap.mmap, pos: int, limit: int) -> Message | None:

@@ -10,19 +10,46 @@ open files are closed, worker processes are stopped, a log being recorded is fin
 
 from __future__ import annotations
 
-import atexit
-import importlib
 import os
 import signal
 import sys
-import threading
-from collections.abc import Sequence
 from types import FrameType
-from typing import Any
 
-import click
 
-from data_schemas.errors import BslamError
+def _stop_at_once(signum: int, frame: FrameType | None) -> None:
+    """A stop signal while the command starts (nothing open yet): one line, exit 128 + signum.
+
+    Raising here instead would surface as a traceback from whatever module was importing
+    ("ImportError: initialization failed" from numpy's C code, say).
+    """
+    os.write(2, b"interrupted\n" if signum == signal.SIGINT else b"terminated\n")
+    os._exit(128 + signum)
+
+
+def _started_as_bslam() -> bool:
+    """This import is the ``bslam`` command starting (the console script or ``-m replay.cli``),
+    not a program that imports the CLI (tests, notebooks), whose signals stay its own."""
+    first = sys.argv[0] if sys.argv else ""
+    return os.path.basename(first) == "bslam" or first == "-m"
+
+
+if _started_as_bslam():  # before the imports below (click alone takes ~50 ms)
+    for _sig in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(_sig) in (signal.SIG_DFL, signal.default_int_handler):
+            signal.signal(_sig, _stop_at_once)
+
+import atexit  # noqa: E402
+import importlib  # noqa: E402
+import threading  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from typing import Any  # noqa: E402
+
+import click  # noqa: E402
+
+from data_schemas.errors import BslamError  # noqa: E402
+
+#: The stop signal received while a command runs (None: none yet).
+_stop_signal: list[int] = []
 
 #: command name -> "module:attribute". Add a command by adding a line here.
 COMMANDS: dict[str, str] = {
@@ -87,7 +114,15 @@ class BslamGroup(click.Group):
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, False, **extra)
         main_thread = threading.current_thread() is threading.main_thread()
-        previous = signal.signal(signal.SIGTERM, _exit_on_sigterm) if main_thread else None
+        previous = {}
+        if main_thread:
+            _stop_signal.clear()
+            previous = {
+                signal.SIGTERM: signal.signal(signal.SIGTERM, _exit_on_sigterm),
+                signal.SIGINT: signal.signal(signal.SIGINT, _interrupt),
+            }
+            if previous[signal.SIGINT] is signal.SIG_IGN:  # a background job: keep ignoring
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
             code = super().main(args, prog_name, complete_var, False, **extra)
         except click.UsageError as exc:  # one line and a hint, not the whole usage text
@@ -103,20 +138,33 @@ class BslamGroup(click.Group):
             sys.exit(128 + signal.SIGINT)
         except BaseException as exc:
             signum = getattr(exc, "signum", None)  # recorder.record.RecordingInterrupted
-            if not isinstance(signum, int):
-                raise
-            click.echo(str(exc), err=True)
-            sys.exit(128 + signum)
+            if isinstance(signum, int):
+                click.echo(str(exc), err=True)
+                sys.exit(128 + signum)
+            if _stop_signal and not isinstance(exc, SystemExit):
+                # whatever a stop signal broke on its way (an import it interrupted raises
+                # ImportError): the stop, not a traceback
+                if _stop_signal[0] == signal.SIGINT:
+                    click.echo("interrupted", err=True)
+                sys.exit(128 + _stop_signal[0])
+            raise
         finally:
-            if main_thread:
-                signal.signal(signal.SIGTERM, previous)
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
         sys.exit(code if isinstance(code, int) else 0)
 
 
 def _exit_on_sigterm(signum: int, frame: FrameType | None) -> None:
     """SIGTERM unwinds like Ctrl-C (files closed, workers stopped), then exits 143."""
+    _stop_signal.append(signum)
     click.echo("terminated", err=True)
     raise SystemExit(128 + signum)
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    """Ctrl-C: Python's KeyboardInterrupt, remembered (see :meth:`BslamGroup.main`)."""
+    _stop_signal.append(signum)
+    raise KeyboardInterrupt
 
 
 @click.group(cls=BslamGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -134,7 +182,8 @@ def main() -> None:
 
     After a stop signal the command has already unwound (logs finished, files closed, workers
     killed); the interpreter's teardown of scipy, matplotlib and Rerun would take about a second
-    more, so the process leaves at once after the exit handlers.
+    more, so the process leaves at once after the exit handlers. A command that finished
+    ignores stop signals during that teardown and exits with its own code.
     """
     try:
         cli(prog_name="bslam")
@@ -144,4 +193,8 @@ def main() -> None:
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(int(exc.code))
+        # the command is done; Python's teardown resets the handlers it installed to the
+        # default (a stop signal then kills with no word): ignore stops while it tears down
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, signal.SIG_IGN)
         raise

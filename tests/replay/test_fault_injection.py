@@ -1,0 +1,388 @@
+"""Fault injection: races for one output, full disks (RLIMIT_FSIZE), bombs, FIFOs, nesting,
+links, stale temporary files, a log being recorded.
+
+Every case must end in one line on stderr, a documented exit code, within seconds, with no
+output under its final name unless complete and no input changed. The commands run as real
+processes where a process is what is attacked (a file-size limit, a FIFO, memory); the oracle is
+what the file system holds afterwards, read with ``os`` and the ``mcap`` library.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import os
+import signal
+import stat
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from mcap.reader import make_reader
+
+from data_schemas.errors import OutputError
+from data_schemas.mcap.compression import MAX_CHUNK_BYTES, DecompressionError, decompress
+from data_schemas.mcap.writer import LogWriter
+from data_schemas.outputs import OutputGuard, create_new
+from recorder.clock import VirtualClock
+from replay.cli import cli
+from tests.hostile import MAGIC, log_with_chunk, nested_text, run_bslam, session_json
+from tests.replay.logfactory import session_doc
+
+ROOT = Path(__file__).resolve().parents[2]
+#: A hostile file must not keep a command busy longer than this (s).
+HANG_S = 5.0
+#: Peak memory a command may use on a hostile file (MiB).
+PEAK_MIB = 300
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _one_error(lines: list[str], text: str = "") -> None:
+    assert len(lines) == 1 and lines[0].startswith("Error: "), lines
+    assert "Traceback" not in lines[0]
+    assert text in lines[0], lines
+
+
+def _only(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+# ------------------------------------------------------------------ races for one output
+def test_a_name_taken_meanwhile_is_not_replaced(tmp_path: Path) -> None:
+    out = tmp_path / "s.json"
+    guard = OutputGuard()
+    guard.claim(out)  # free when claimed ...
+    taken = pytest.raises(OutputError, match="created by another process meanwhile")
+    with taken, guard.writing(out) as stream:
+        stream.write(b"mine")
+        out.write_bytes(b"theirs")  # ... taken by another process before we finish
+    assert out.read_bytes() == b"theirs"
+    assert _only(tmp_path) == ["s.json"]  # our temporary file is gone
+
+
+def test_two_recorders_cannot_share_a_name(tmp_path: Path) -> None:
+    log = tmp_path / "run.mcap"
+    with create_new(log):
+        log.write_bytes(b"first")
+        with pytest.raises(OutputError, match="created by another process"), create_new(log):
+            log.write_bytes(b"second")  # never reached
+    assert log.read_bytes() == b"first"
+    with pytest.raises(RuntimeError), create_new(tmp_path / "other.mcap"):
+        raise RuntimeError  # failed before writing: no empty file left behind
+    assert _only(tmp_path) == ["run.mcap"]
+
+
+@pytest.mark.slow
+def test_two_simulations_racing_for_one_log(tmp_path: Path) -> None:
+    args = [sys.executable, "-m", "replay.cli", "simulate", "--scenario", "paper"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    procs = [
+        subprocess.Popen(
+            [*args, "--out", "run.mcap", "--seed", str(seed)],
+            cwd=tmp_path,
+            env=env,
+            stderr=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            text=True,
+        )
+        for seed in (1, 2)
+    ]
+    results = [(p.wait(timeout=120), p.stderr.read() if p.stderr else "") for p in procs]
+    codes = sorted(code for code, _ in results)
+    assert codes == [0, 1], results
+    loser = next(err for code, err in results if code == 1)
+    assert "exists" in loser or "another process" in loser, loser
+    with (tmp_path / "run.mcap").open("rb") as f:  # the winner's log, whole and finished
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert summary.statistics.message_count > 0
+
+
+# ------------------------------------------------------------------ full disk
+@pytest.mark.parametrize(
+    ("command", "outputs"),
+    [
+        pytest.param(
+            ["process", "{log}", "--out", "d.mcap", "--summary", "s.json"],
+            ["d.mcap", "s.json"],
+            marks=pytest.mark.slow,
+        ),
+        (["recover", "{log}", "r.mcap"], ["r.mcap"]),
+    ],
+)
+def test_a_full_disk_is_one_line_and_leaves_nothing(
+    small_log: Path, tmp_path: Path, command: list[str], outputs: list[str]
+) -> None:
+    before = _digest(small_log)
+    args = [a.format(log=small_log) for a in command]
+    code, lines, _ = run_bslam(*args, limit=4000, cwd=tmp_path)
+    assert code == 1
+    _one_error(lines, "cannot write")
+    assert _only(tmp_path) == []  # no output, no temporary file
+    assert _digest(small_log) == before
+
+
+@pytest.mark.slow
+def test_a_full_disk_under_the_rerun_recording(small_log: Path, tmp_path: Path) -> None:
+    code, lines, _ = run_bslam("replay", small_log, "--save", "r.rrd", limit=60_000, cwd=tmp_path)
+    assert code == 1
+    _one_error(lines, "cannot write")
+    assert _only(tmp_path) == []
+
+
+# ------------------------------------------------------------------ bombs and lies
+@pytest.fixture(scope="module")
+def session(small_log: Path) -> str:
+    return session_json(small_log)
+
+
+@pytest.mark.parametrize("compression", ["zstd", pytest.param("lz4", marks=pytest.mark.slow)])
+def test_a_chunk_of_zeros_is_refused_quickly_in_little_memory(
+    session: str, tmp_path: Path, compression: str
+) -> None:
+    # a small file (zstd: 2 KB, lz4: 200 KB) whose chunk inflates to 48 MiB of zeros (empty
+    # records, opcode 0)
+    bomb = log_with_chunk(
+        tmp_path / "bomb.mcap", session, b"{}", compression=compression, raw=bytes(48 << 20)
+    )
+    assert bomb.stat().st_size < 256 * 1024
+    for command in ("info", "process"):
+        start = time.monotonic()
+        code, lines, peak = run_bslam(command, bomb)
+        assert time.monotonic() - start < HANG_S + 5  # start-up included
+        assert code == 1
+        _one_error(lines, "inside a chunk")
+        assert peak <= PEAK_MIB
+
+
+def test_a_chunk_that_states_a_huge_size_is_refused(session: str, tmp_path: Path) -> None:
+    liar = log_with_chunk(tmp_path / "liar.mcap", session, b"{}", declared=3 << 30)
+    code, lines, peak = run_bslam("info", liar)
+    assert code == 1
+    _one_error(lines, "corrupt")
+    assert peak <= PEAK_MIB
+
+
+def test_decompression_never_exceeds_the_stated_size() -> None:
+    import lz4.frame
+    import zstandard
+
+    data = bytes(1 << 20)
+    streamed = zstandard.ZstdCompressor(write_content_size=False).compress(data)
+    with pytest.raises(DecompressionError):  # says 1000, holds a MiB, no size in the frame
+        decompress("zstd", streamed, 1000)
+    with pytest.raises(DecompressionError):  # the frame's own size disagrees
+        decompress("zstd", zstandard.ZstdCompressor().compress(data), 1000)
+    with pytest.raises(DecompressionError):
+        decompress("lz4", lz4.frame.compress(data), 1000)
+    with pytest.raises(DecompressionError, match="over the limit"):
+        decompress("zstd", streamed, MAX_CHUNK_BYTES + 1)
+    assert decompress("lz4", lz4.frame.compress(data), len(data)) == data
+    assert decompress("zstd", streamed, len(data)) == data
+
+
+# ------------------------------------------------------------------ nesting and numbers
+def _scenario(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "s.json"
+    path.write_text(text)
+    return path
+
+
+def test_deep_nesting_is_one_line_everywhere(session: str, tmp_path: Path) -> None:
+    runner = CliRunner()
+    deep_scenario = _scenario(tmp_path, nested_text(100_000))
+    result = runner.invoke(cli, ["simulate", "--scenario", str(deep_scenario), "--out", "x"])
+    assert result.exit_code == 1 and "nests deeper than" in result.output, result.output
+    deep_session = log_with_chunk(tmp_path / "meta.mcap", nested_text(100_000), b"{}")
+    for command in ("info", "process"):
+        result = runner.invoke(cli, [command, str(deep_session)])
+        assert result.exception is None or isinstance(result.exception, SystemExit)
+        assert "RecursionError" not in result.output
+    message = log_with_chunk(
+        tmp_path / "msg.mcap",
+        session,
+        nested_text(100_000).encode(),
+        topic="/robot/movement",
+        schema="bslam.Movement",
+    )
+    result = runner.invoke(cli, ["process", str(message)])
+    assert result.exit_code == 1 and "nests deeper than 64" in result.output, result.output
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_huge_movement_index_never_reaches_gtsam(session: str, tmp_path: Path) -> None:
+    movement = {
+        "timestamp": {"sec": 0, "nsec": 1},
+        "index": 10**30,
+        "phase": "start",
+        "keyframe_timestamp": {"sec": 0, "nsec": 1},
+        "turn_rad": 0.0,
+        "distance_m": 0.1,
+    }
+    log = log_with_chunk(
+        tmp_path / "big.mcap",
+        session,
+        json.dumps(movement).encode(),
+        topic="/robot/movement",
+        schema="bslam.Movement",
+    )
+    result = CliRunner().invoke(cli, ["process", str(log), "--estimator", "joint"])
+    assert result.exit_code == 1, result.output
+    assert "field 'index' should be in [0, 2147483647], got a 31-digit number" in result.output
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [("bearing_noise_deg", 1e308), ("pixel_noise", 1e308)],
+)
+def test_absurd_camera_noise_is_refused_at_entry(tmp_path: Path, key: str, value: float) -> None:
+    from recorder.sim.scenario import BUILTIN_SCENARIOS  # noqa: F401 (the paper's exists)
+
+    doc = json.loads((ROOT / "recorder" / "sim" / "scenarios" / "paper.json").read_text())
+    doc["camera"][key] = value
+    path = _scenario(tmp_path, json.dumps(doc))
+    result = CliRunner().invoke(cli, ["simulate", "--scenario", str(path), "--out", "x.mcap"])
+    assert result.exit_code == 1 and "maximum" in result.output, result.output
+    assert not (tmp_path / "x.mcap").exists()
+
+
+# ------------------------------------------------------------------ special files
+@pytest.fixture()
+def fifo(tmp_path: Path) -> Iterator[Path]:
+    path = tmp_path / "pipe.mcap"
+    os.mkfifo(path)
+    yield path
+
+
+def test_a_fifo_is_refused_at_once(fifo: Path, tmp_path: Path) -> None:
+    runner = CliRunner()
+    for args in (["info"], ["process"], ["recover", "--force"]):
+        extra = [str(tmp_path / "r.mcap")] if args[0] == "recover" else []
+        start = time.monotonic()
+        result = runner.invoke(cli, [args[0], str(fifo), *extra, *args[1:]])
+        assert time.monotonic() - start < HANG_S
+        assert result.exit_code == 1
+        assert "is a FIFO, not a regular file" in result.output, result.output
+    for device in ("/dev/zero",):
+        result = runner.invoke(cli, ["simulate", "--scenario", device, "--out", "x.mcap"])
+        assert result.exit_code == 1 and "character device" in result.output, result.output
+
+
+@pytest.mark.slow
+def test_follow_gives_up_on_a_fifo_after_its_idle_timeout(fifo: Path) -> None:
+    start = time.monotonic()
+    code, lines, _ = run_bslam("process", "--follow", "--idle-timeout", "1", fifo, timeout=30)
+    assert time.monotonic() - start < HANG_S + 5
+    assert code == 1
+    _one_error(lines, "has not grown for 1 s")
+
+
+# ------------------------------------------------------------------ links and leftovers
+def test_a_dangling_link_is_an_existing_output(small_log: Path, tmp_path: Path) -> None:
+    target = tmp_path / "elsewhere" / "s.json"
+    target.parent.mkdir()
+    link = tmp_path / "s.json"
+    link.symlink_to(target)
+    runner = CliRunner()
+    result = runner.invoke(cli, ["process", str(small_log), "--summary", str(link)])
+    assert result.exit_code == 1 and "exists (a symbolic link)" in result.output
+    assert not target.exists() and link.is_symlink()
+    result = runner.invoke(cli, ["process", str(small_log), "--summary", str(link), "--force"])
+    assert result.exit_code == 0, result.output
+    assert not target.exists()  # the link is replaced by the file, never written through
+    assert not link.is_symlink() and json.loads(link.read_text())["movements"]
+
+
+def test_stale_temporary_files_are_cleaned(small_log: Path, tmp_path: Path) -> None:
+    stale = tmp_path / ".s.json.abcd1234.part.json"
+    stale.write_text("left by a killed run")
+    old = time.time() - 3600
+    os.utime(stale, (old, old))
+    live = tmp_path / ".s.json.live0000.part.json"
+    live.write_text("another run, still writing")
+    os.utime(live, (old, old))
+    with live.open("rb") as held:
+        fcntl.flock(held.fileno(), fcntl.LOCK_SH)
+        result = CliRunner().invoke(
+            cli, ["process", str(small_log), "--summary", str(tmp_path / "s.json")]
+        )
+    assert result.exit_code == 0, result.output
+    assert _only(tmp_path) == [".s.json.live0000.part.json", "s.json"]
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o077])
+def test_outputs_follow_the_umask(small_log: Path, tmp_path: Path, mask: int) -> None:
+    previous = os.umask(mask)
+    try:
+        result = CliRunner().invoke(
+            cli, ["process", str(small_log), "--summary", str(tmp_path / "s.json")]
+        )
+    finally:
+        os.umask(previous)
+    assert result.exit_code == 0, result.output
+    assert stat.S_IMODE((tmp_path / "s.json").stat().st_mode) == 0o666 & ~mask
+
+
+# ------------------------------------------------------------------ a log being recorded
+def test_info_on_a_log_being_recorded(tmp_path: Path) -> None:
+    log = tmp_path / "run.mcap"
+    writer = LogWriter(log, session_doc(), clock=VirtualClock())
+    try:
+        writer.flush()
+        result = CliRunner().invoke(cli, ["info", str(log)])
+    finally:
+        writer.finish()
+    assert result.exit_code == 0, result.output
+    assert f"{log.name}: being recorded" in result.output
+    assert "--follow" in result.output
+    result = CliRunner().invoke(cli, ["info", str(log)])  # finished now
+    assert result.exit_code == 0 and "being recorded" not in result.output
+
+
+# ------------------------------------------------------------------ recover
+def test_recover_refuses_a_file_of_magic_bytes(tmp_path: Path) -> None:
+    magic = tmp_path / "magic.mcap"
+    magic.write_bytes(MAGIC)
+    result = CliRunner().invoke(cli, ["recover", str(magic), str(tmp_path / "r.mcap")])
+    assert result.exit_code == 1 and "nothing readable" in result.output, result.output
+    assert _only(tmp_path) == ["magic.mcap"]
+
+
+# ------------------------------------------------------------------ signals at start-up
+# (earlier than ~0.2 s the interpreter itself is starting: Python's own start-up, not ours)
+@pytest.mark.parametrize(
+    ("signum", "delay_s"),
+    [(signal.SIGTERM, 0.4)]
+    + [
+        pytest.param(signum, delay_s, marks=pytest.mark.slow)
+        for signum in (signal.SIGTERM, signal.SIGINT)
+        for delay_s in (0.4, 0.9, 1.6)
+        if (signum, delay_s) != (signal.SIGTERM, 0.4)
+    ],
+)
+def test_a_stop_during_start_up_is_clean(
+    small_log: Path, tmp_path: Path, signum: int, delay_s: float
+) -> None:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "replay.cli", "process", str(small_log), "--estimator", "joint"],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(delay_s)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=HANG_S * 2)
+    assert "Traceback" not in err, err
+    if proc.returncode != 0:  # 0: it finished before the signal came
+        assert proc.returncode == 128 + signum, err
+        assert len(err.strip().splitlines()) == 1, err
