@@ -171,6 +171,10 @@ def _state_line(s: LogSummary) -> str:
     return f"CORRUPT ({len(corruption(s.damage))} damaged part(s), listed below)"
 
 
+#: Source files of an imported session listed by name (the rest are counted).
+_LISTED_FILES = 5
+
+
 def _session_lines(metadata: dict[str, dict[str, str]]) -> list[str]:
     record = metadata.get(SESSION_METADATA_NAME)
     if record is None:
@@ -187,7 +191,10 @@ def _session_lines(metadata: dict[str, dict[str, str]]) -> list[str]:
     made = f"software {doc['software_version']}, created {_when(doc['created_unix_ns'])}"
     source = session.provenance
     if source is not None:
-        files = ", ".join(f"{f['name']} (sha256 {f['sha256'][:12]}...)" for f in source["files"])
+        listed = source["files"][:_LISTED_FILES]
+        files = ", ".join(f"{f['name']} (sha256 {f['sha256'][:12]}...)" for f in listed)
+        more = len(source["files"]) - len(listed)
+        files += f" and {more} more" if more else ""
         lines = [f"session: imported by the {source['kind']} importer from {files}, {made}"]
     else:
         robot = doc.get("robot")

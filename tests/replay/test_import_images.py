@@ -65,6 +65,10 @@ def test_frames_odometry_and_provenance(tmp_path: Path) -> None:
     assert [t for t, *_ in messages] == [
         "/robot/odometry_pose", "/camera/panorama", "/camera/panorama", "/robot/odometry_pose"
     ]  # fmt: skip
+    info = CliRunner().invoke(cli, ["info", str(tmp_path / "out.mcap")]).output
+    # six files: five are named, the last counted
+    assert "imported by the images importer from t.csv (sha256 " in info
+    assert "b.png" not in info and " and 1 more, " in info
     files = {f["name"]: f["sha256"] for f in session["provenance"]["files"]}
     for name in ("a.png", "b.png"):
         data = (tmp_path / "frames" / name).read_bytes()
