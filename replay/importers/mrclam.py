@@ -269,32 +269,45 @@ def barcode_check(
     """Notes on landmarks whose sightings disagree with the truth (a wrong barcode table).
 
     For each sighting the robot's true pose is interpolated between the truth rows around it
-    (if they are at most 1 s apart); the landmark's median |bearing error| above
-    :data:`SUSPECT_BEARING_DEG` is reported.
+    (if they are at most 1 s apart). A landmark whose sightings are, in median, more than
+    :data:`SUSPECT_BEARING_DEG` from the truth's bearing is reported, with the landmark its
+    barcode fits best (the least median error) as the correction to try.
     """
     times = [t for t, _ in truth]
-    errors: dict[str, list[float]] = {}
+    # per table name: (true robot pose, measured bearing) of each sighting
+    seen: dict[str, list[tuple[float, float, float, float]]] = {}
     for t_ns, name, bearing in sightings:
         i = bisect.bisect_right(times, t_ns)
         if i == 0 or i == len(times) or times[i] - times[i - 1] > 1_000_000_000:
             continue
         (x0, y0, h0), (x1, y1, h1) = truth[i - 1][1], truth[i][1]
         f = (t_ns - times[i - 1]) / (times[i] - times[i - 1])
-        x, y = x0 + f * (x1 - x0), y0 + f * (y1 - y0)
-        heading = h0 + f * wrap_rad(h1 - h0)
-        lx, ly = landmarks[name]
-        expected = math.atan2(ly - y, lx - x) - heading
-        errors.setdefault(name, []).append(abs(wrap_rad(bearing - expected)))
+        pose = (x0 + f * (x1 - x0), y0 + f * (y1 - y0), h0 + f * wrap_rad(h1 - h0), bearing)
+        seen.setdefault(name, []).append(pose)
+
+    def median_deg(
+        views: list[tuple[float, float, float, float]], at: tuple[float, float]
+    ) -> float:
+        errs = [abs(wrap_rad(b - math.atan2(at[1] - y, at[0] - x) + h)) for x, y, h, b in views]
+        return math.degrees(statistics.median(errs))
+
     barcode_of = {landmark_name(s): b for b, s in subject_of.items()}
     notes = []
-    for name, errs in errors.items():
-        median_deg = math.degrees(statistics.median(errs))
-        if median_deg > SUSPECT_BEARING_DEG:
-            notes.append(
-                f"check the barcode table: {name} (barcode {barcode_of[name]}) is seen "
-                f"{median_deg:.0f} deg (median of {len(errs)}) from where the truth puts it; "
-                "correct it with --barcode SUBJECT=BARCODE"
-            )
+    for name, views in seen.items():
+        error_deg = median_deg(views, landmarks[name])
+        if error_deg <= SUSPECT_BEARING_DEG:
+            continue
+        fits = {other: median_deg(views, xy) for other, xy in landmarks.items()}
+        best = min(fits, key=fits.__getitem__)
+        fix = (
+            f"it fits {best} ({fits[best]:.1f} deg): try --barcode {best[1:]}={barcode_of[name]}"
+            if fits[best] <= SUSPECT_BEARING_DEG
+            else "it fits no landmark; correct it with --barcode SUBJECT=BARCODE"
+        )
+        notes.append(
+            f"check the barcode table: {name} (barcode {barcode_of[name]}) is seen "
+            f"{error_deg:.0f} deg (median of {len(views)}) from where the truth puts it; {fix}"
+        )
     return notes
 
 

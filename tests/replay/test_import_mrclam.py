@@ -98,6 +98,9 @@ def test_a_wrong_barcode_table_is_reported_and_corrected(tmp_path: Path) -> None
     assert code == 0
     assert "check the barcode table: L6 (barcode 54)" in output
     assert "check the barcode table: L8 (barcode 72)" in output
+    # barcode 54's sightings are where the truth puts L8, and 72's where it puts L6
+    assert "it fits L8 (0.0 deg): try --barcode 8=54" in output
+    assert "it fits L6 (0.0 deg): try --barcode 6=72" in output
     assert "L7" not in output.split("check the barcode table")[-1].split("\n")[0]
     code, output = _import(folder, "--barcode", "6=72", "--barcode", "8=54", "--force")
     assert code == 0 and "check the barcode table" not in output
