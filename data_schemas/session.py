@@ -28,8 +28,10 @@ class LandmarkSpec:
 
     Either ``color`` (a single-colour landmark, optional HSV override ``hsv_lo``/``hsv_hi``) or
     ``bands`` (a coded landmark: two or more colour names, top to bottom, equal heights; then
-    ``color`` is None), or neither in a session without a camera (known by its name only: a
-    beacon id, a fiducial, an imported dataset's landmark number).
+    ``color`` is None; optional HSV override per band, ``band_hsv``: ``(lo, hi)`` per band), or
+    neither in a session without a camera (known by its name only: a beacon id, a fiducial,
+    an imported dataset's landmark number). ``width_m`` and ``height_m``: its physical size
+    (m), if known.
     """
 
     name: str
@@ -37,6 +39,9 @@ class LandmarkSpec:
     hsv_lo: tuple[int, int, int] | None = None
     hsv_hi: tuple[int, int, int] | None = None
     bands: tuple[str, ...] = ()
+    band_hsv: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = ()
+    width_m: float | None = None
+    height_m: float | None = None
 
     @property
     def label(self) -> str:
@@ -89,6 +94,9 @@ class Session:
     calibration : Calibration or None
         How image positions map to bearings; None in a session without a camera (its bearings
         come from ``/sensor/bearings``).
+    simulated : bool
+    range_m : (float, float) or None
+        Nearest and farthest distance (m) a landmark can be seen from, if given.
     doc : dict
         The whole JSON document (robot settings, camera source, scenario, provenance, versions).
     """
@@ -99,6 +107,7 @@ class Session:
     calibration: Calibration | None
     simulated: bool
     doc: dict[str, Any] = field(repr=False, compare=False)
+    range_m: tuple[float, float] | None = None
 
     @property
     def scenario(self) -> dict[str, Any] | None:
@@ -158,14 +167,25 @@ def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> 
     specs = []
     for lm in doc["landmarks"]:
         hsv = lm.get("hsv")
+        one = hsv if isinstance(hsv, dict) else None
+        per_band = hsv if isinstance(hsv, list) else []
         specs.append(
             LandmarkSpec(
                 lm["name"],
                 lm.get("color"),
-                tuple(hsv["lo"]) if hsv else None,
-                tuple(hsv["hi"]) if hsv else None,
+                tuple(one["lo"]) if one else None,
+                tuple(one["hi"]) if one else None,
                 tuple(lm.get("bands", ())),
+                tuple((tuple(b["lo"]), tuple(b["hi"])) for b in per_band),
+                float(lm["width"]) if "width" in lm else None,
+                float(lm["height"]) if "height" in lm else None,
             )
+        )
+    range_m = doc.get("range_m")
+    if range_m is not None and not range_m[0] < range_m[1]:
+        raise SchemaError(
+            f"{what}: field 'range_m': nearest {range_m[0]:g} m must be below farthest "
+            f"{range_m[1]:g} m"
         )
     return Session(
         landmarks=tuple(specs),
@@ -174,6 +194,7 @@ def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> 
         calibration=None if no_camera else calibration_from_dict(doc["camera"]["calibration"]),
         simulated=bool(doc["simulated"]),
         doc=doc,
+        range_m=None if range_m is None else (float(range_m[0]), float(range_m[1])),
     )
 
 

@@ -25,7 +25,8 @@ from data_schemas.session import (
 
 
 def landmark_entry(spec: LandmarkSpec) -> dict[str, Any]:
-    """JSON form of one catalog entry (``hsv`` only when the colour class is overridden)."""
+    """JSON form of one catalog entry (``hsv`` only when the colour class is overridden, one box
+    or one per band; ``width``/``height`` when known)."""
     entry: dict[str, Any] = {"name": spec.name}
     if spec.bands:
         entry["bands"] = list(spec.bands)
@@ -33,6 +34,12 @@ def landmark_entry(spec: LandmarkSpec) -> dict[str, Any]:
         entry["color"] = spec.color
     if spec.hsv_lo is not None and spec.hsv_hi is not None:
         entry["hsv"] = {"lo": list(spec.hsv_lo), "hi": list(spec.hsv_hi)}
+    if spec.band_hsv:
+        entry["hsv"] = [{"lo": list(lo), "hi": list(hi)} for lo, hi in spec.band_hsv]
+    if spec.width_m is not None:
+        entry["width"] = spec.width_m
+    if spec.height_m is not None:
+        entry["height"] = spec.height_m
     return entry
 
 
@@ -178,22 +185,30 @@ def _node_value(node: Any) -> Any:
 
 @dataclass(frozen=True)
 class LandmarkCatalog:
-    """The landmark file of ``bslam record``: catalog, reference pair and vision error bound."""
+    """The landmark file of ``bslam record``: catalog, reference pair, vision error bound and the
+    distances landmarks can be seen from (``range_m``, optional)."""
 
     landmarks: tuple[LandmarkSpec, ...]
     reference: tuple[str, str]
     vision_error_rad: float
+    range_m: tuple[float, float] | None = None
+
+    def session_keys(self) -> dict[str, Any]:
+        """Top-level session keys besides landmarks, reference and the error bound."""
+        return {} if self.range_m is None else {"range_m": list(self.range_m)}
 
 
 def load_landmark_file(path: str | os.PathLike[str]) -> LandmarkCatalog:
-    """Read a landmark file: ``{"landmarks": [{"name", "color"[, "hsv"]} or {"name", "bands"}],
-    "reference": [a, b], "vision_error_deg": eps}`` (the same keys as the session document);
-    raise SchemaError (also when a reference landmark shares its class with another)."""
+    """Read a landmark file: ``{"landmarks": [{"name", "color"[, "hsv"]} or {"name", "bands"[,
+    "hsv": [one box per band]]}, each with optional "width", "height" (m)], "reference": [a, b],
+    "vision_error_deg": eps[, "range_m": [nearest, farthest]]}`` (the same keys as the session
+    document); raise SchemaError (also when a reference landmark shares its class with
+    another)."""
     doc = _read_json(path, "landmark")
     what = f"landmark file {os.fspath(path)}"
     if not isinstance(doc, dict):
         raise SchemaError(f"{what}: expected a JSON object with 'landmarks' and 'reference'")
-    unknown = sorted(set(doc) - {"landmarks", "reference", "vision_error_deg"})
+    unknown = sorted(set(doc) - {"landmarks", "reference", "vision_error_deg", "range_m"})
     if unknown:
         raise SchemaError(f"{what}: unknown key {unknown[0]!r}")
     probe = {
@@ -209,4 +224,6 @@ def load_landmark_file(path: str | os.PathLike[str]) -> LandmarkCatalog:
     shared = shared_reference_problem(session.landmarks, session.reference)
     if shared:
         raise SchemaError(f"{what}: field 'reference': {shared}")
-    return LandmarkCatalog(session.landmarks, session.reference, session.vision_error_rad)
+    return LandmarkCatalog(
+        session.landmarks, session.reference, session.vision_error_rad, session.range_m
+    )

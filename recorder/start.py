@@ -198,7 +198,10 @@ def record_robot_session(
         landmarks=catalog.landmarks,
         reference=catalog.reference,
         vision_error_rad=catalog.vision_error_rad,
-        extra={"recorder": {"png_level": spec.settings.png_level, "seed": spec.seed}},
+        extra={
+            "recorder": {"png_level": spec.settings.png_level, "seed": spec.seed},
+            **catalog.session_keys(),
+        },
     )
     clock = EpochClock(SystemClock())
     camera = OpenCVCamera(spec.camera_source, calibration)

@@ -175,7 +175,11 @@ class Runner:
         if shared:
             raise EstimationError(f"{log.name}: {shared}")
         cal = self.session.calibration
-        self._extractor = None if cal is None else BearingExtractor(cal, self.session.landmarks)
+        self._extractor = (
+            None
+            if cal is None
+            else BearingExtractor(cal, self.session.landmarks, range_m=self.session.range_m)
+        )
         alike = shared_classes(self.session.landmarks)
         if alike and method.estimator == "paper":
             classes = ", ".join(f"{c} ({', '.join(n)})" for c, n in alike.items())

@@ -4,7 +4,8 @@ A box is ``lo <= (h, s, v) <= hi`` per channel, except hue, which wraps when ``l
 (red: ``h >= 168 or h <= 12``). Defaults are +-12 hue units (+-24 deg) around each nominal
 colour of :data:`data_schemas.colors.NOMINAL_BGR`, saturation >= 90 and value >= 50, so dim
 lighting (value down to ~25% of nominal) and sensor noise still pass while grey and white do
-not. A landmark's ``hsv_lo``/``hsv_hi`` in the session metadata replace the default box.
+not. A landmark's ``hsv_lo``/``hsv_hi`` in the session metadata replace the default box; a
+coded landmark's ``band_hsv`` (one box per band) replace its bands' default boxes.
 """
 
 from __future__ import annotations
@@ -85,27 +86,60 @@ def hsv_box_for(spec: LandmarkSpec) -> HsvBox:
     """
     if spec.bands:
         raise LandmarkCatalogError(
-            f"landmark {spec.name!r} is coded (bands {list(spec.bands)}); its bands use the "
-            "default box of each colour"
+            f"landmark {spec.name!r} is coded (bands {list(spec.bands)}); its bands' boxes are "
+            "band_boxes_for's"
         )
     color = _check_color(spec.name, spec.color)
+    if spec.band_hsv:
+        raise LandmarkCatalogError(
+            f"landmark {spec.name!r} has one colour: give 'hsv' one box {{lo, hi}}, not a list"
+        )
     if spec.hsv_lo is None and spec.hsv_hi is None:
         return DEFAULT_HSV[color]
     if spec.hsv_lo is None or spec.hsv_hi is None:
         raise LandmarkCatalogError(
             f"landmark {spec.name!r}: an HSV override needs both 'lo' and 'hi'"
         )
-    if len(spec.hsv_lo) != 3 or len(spec.hsv_hi) != 3:
+    return _box(spec.name, spec.hsv_lo, spec.hsv_hi)
+
+
+def band_boxes_for(spec: LandmarkSpec) -> tuple[HsvBox, ...]:
+    """The HSV box of each band of coded landmark ``spec`` (top to bottom): its per-band
+    override if given, else each colour's default.
+
+    Raises
+    ------
+    LandmarkCatalogError
+        Unknown colour name, a single box given for a code, a count of boxes other than the
+        number of bands, or a malformed box.
+    """
+    for color in spec.bands:
+        _check_color(spec.name, color)
+    if spec.hsv_lo is not None or spec.hsv_hi is not None:
         raise LandmarkCatalogError(
-            f"landmark {spec.name!r}: HSV override bounds need 3 values (h, s, v) each"
+            f"landmark {spec.name!r} is coded: give 'hsv' as a list of {len(spec.bands)} boxes "
+            "{lo, hi}, one per band, top to bottom"
+        )
+    if not spec.band_hsv:
+        return tuple(DEFAULT_HSV[c] for c in spec.bands)
+    if len(spec.band_hsv) != len(spec.bands):
+        raise LandmarkCatalogError(
+            f"landmark {spec.name!r} has {len(spec.bands)} bands but {len(spec.band_hsv)} HSV "
+            "boxes; give one box per band, top to bottom"
+        )
+    return tuple(_box(spec.name, lo, hi) for lo, hi in spec.band_hsv)
+
+
+def _box(name: str, lo: Sequence[int], hi: Sequence[int]) -> HsvBox:
+    """An override box of landmark ``name``, checked."""
+    if len(lo) != 3 or len(hi) != 3:
+        raise LandmarkCatalogError(
+            f"landmark {name!r}: HSV override bounds need 3 values (h, s, v) each"
         )
     try:
-        return HsvBox(
-            (int(spec.hsv_lo[0]), int(spec.hsv_lo[1]), int(spec.hsv_lo[2])),
-            (int(spec.hsv_hi[0]), int(spec.hsv_hi[1]), int(spec.hsv_hi[2])),
-        )
+        return HsvBox((int(lo[0]), int(lo[1]), int(lo[2])), (int(hi[0]), int(hi[1]), int(hi[2])))
     except LandmarkCatalogError as exc:
-        raise LandmarkCatalogError(f"landmark {spec.name!r}: {exc}") from None
+        raise LandmarkCatalogError(f"landmark {name!r}: {exc}") from None
 
 
 def _check_color(name: str, color: str | None) -> str:
@@ -129,7 +163,7 @@ class LandmarkClass:
     colors : tuple of str
         The colour (one) or the bands (two or more, top to bottom).
     boxes : tuple of HsvBox
-        The HSV box of each colour (a single colour's override if given, else the defaults).
+        The HSV box of each colour (the landmark's override if given, else the defaults).
     landmarks : tuple of str
         Catalog names of this class, in catalog order; more than one makes the class ambiguous.
     """
@@ -152,7 +186,7 @@ def landmark_classes(catalog: Sequence[LandmarkSpec]) -> list[LandmarkClass]:
     ------
     LandmarkCatalogError
         Unknown colour, malformed HSV override, a code with fewer than two bands or two equal
-        adjacent bands, or two landmarks of one colour with different HSV overrides.
+        adjacent bands, or two landmarks of one class with different HSV boxes.
     """
     classes: dict[str, LandmarkClass] = {}
     for spec in catalog:
@@ -160,15 +194,8 @@ def landmark_classes(catalog: Sequence[LandmarkSpec]) -> list[LandmarkClass]:
             problem = band_problem(spec.bands)
             if problem:
                 raise LandmarkCatalogError(f"landmark {spec.name!r}: {problem}")
-            if spec.hsv_lo is not None or spec.hsv_hi is not None:
-                raise LandmarkCatalogError(
-                    f"landmark {spec.name!r}: an HSV override is for a single-colour landmark; "
-                    "the bands of a code use the default box of each colour"
-                )
-            for color in spec.bands:
-                _check_color(spec.name, color)
             colors = tuple(spec.bands)
-            boxes = tuple(DEFAULT_HSV[c] for c in colors)
+            boxes = band_boxes_for(spec)
         else:
             boxes = (hsv_box_for(spec),)
             colors = (str(spec.color),)
@@ -178,7 +205,7 @@ def landmark_classes(catalog: Sequence[LandmarkSpec]) -> list[LandmarkClass]:
         elif same.boxes != boxes:
             raise LandmarkCatalogError(
                 f"landmarks {same.landmarks[0]!r} and {spec.name!r} are both {spec.label} but "
-                "have different HSV boxes; give landmarks of one colour the same override"
+                "have different HSV boxes; give landmarks of one class the same override"
             )
         else:
             classes[spec.label] = LandmarkClass(

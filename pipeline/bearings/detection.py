@@ -77,6 +77,9 @@ class ClassSightings:
         Blobs dropped as mixed-colour fringes of other landmarks.
     coded : bool
         True for a band code.
+    rejected : tuple of (Blob, str)
+        Blobs of a size no landmark of the class can have (:mod:`pipeline.bearings.size_gate`),
+        each with the reason; not in ``blobs``.
     """
 
     label: str
@@ -85,6 +88,7 @@ class ClassSightings:
     largest: int
     n_fringes: int = 0
     coded: bool = False
+    rejected: tuple[tuple[Blob, str], ...] = ()
 
 
 def detection_of(name: str, sightings: ClassSightings, *, min_pixels: int) -> Detection:
@@ -101,6 +105,9 @@ def detection_of(name: str, sightings: ClassSightings, *, min_pixels: int) -> De
         )
         if sightings.coded and not det.visible and not sightings.largest:
             det = replace(det, reason=f"band code {sightings.label} not read")
+        if not det.visible and sightings.rejected:
+            n, why = len(sightings.rejected), sightings.rejected[0][1]
+            det = replace(det, reason=f"no blob of a landmark's size ({n} rejected; {why})")
         return replace(det, blobs=sightings.blobs)
     others = ", ".join(n for n in sightings.landmarks if n != name)
     reason = (

@@ -32,6 +32,7 @@ from pipeline.bearings.classify import ClassBit, ColorClassifier
 from pipeline.bearings.color_classes import HsvBox, LandmarkCatalogError, landmark_classes
 from pipeline.bearings.detection import ClassSightings, Detection, detection_of
 from pipeline.bearings.layout import OmniLayout, PinholeLayout, PixelLayout, make_layout
+from pipeline.bearings.size_gate import size_gate
 
 #: Default ``min_pixels``: a blob must be at least a 2 x 2 pixel patch, whatever the image size.
 #: A landmark far away is a sliver a pixel or two wide and a few rows tall at any resolution,
@@ -87,6 +88,10 @@ class BearingExtractor:
     max_gap_bins : int, optional
         Profile runs this close (empty bins between them) are one blob; default one column
         (unwrapped) or one pixel's span at ``r_min`` (omni).
+    range_m : (float, float), optional
+        Nearest and farthest distance (m) landmarks can be seen from: with the catalog's
+        landmark widths, blobs of a size no landmark of their class can have are rejected
+        (:mod:`pipeline.bearings.size_gate`; ``ClassSightings.rejected``).
 
     Raises
     ------
@@ -102,6 +107,7 @@ class BearingExtractor:
         min_pixels: int | None = None,
         method: Method = "profile",
         max_gap_bins: int | None = None,
+        range_m: tuple[float, float] | None = None,
     ) -> None:
         names = [spec.name for spec in catalog]
         if len(set(names)) != len(names):
@@ -118,6 +124,13 @@ class BearingExtractor:
         self.max_gap_bins = self._layout.gap_bins if max_gap_bins is None else max_gap_bins
         self.classes = landmark_classes(catalog)
         self._class_of = {n: c.label for c in self.classes for n in c.landmarks}
+        spec_of = {spec.name: spec for spec in catalog}
+        self._gates = {
+            c.label: size_gate(
+                [spec_of[n] for n in c.landmarks], range_m, self._layout.bin_width_rad
+            )
+            for c in self.classes
+        }
         # one classifier slot per distinct HSV box, shared by every class that uses it
         boxes: list[HsvBox] = []
         for cls in self.classes:
@@ -262,8 +275,9 @@ class BearingExtractor:
             kept = [b for b in blobs if not is_fringe(b, others + code_blobs, **fringe)]
             n_fringes = len(blobs) - len(kept)
             kept = [b for b in kept if not any(self._within(b, c) for c in code_blobs)]
+            kept, rejected = self._gate(cls.label, kept)
             out[cls.label] = ClassSightings(
-                cls.label, cls.landmarks, tuple(kept), largest, n_fringes
+                cls.label, cls.landmarks, tuple(kept), largest, n_fringes, rejected=rejected
             )
         single_blobs = [(b, c.colors) for c in self._singles for b in out[c.label].blobs]
         for k, (cls, (blobs, largest)) in enumerate(zip(self._coded, coded, strict=True)):
@@ -281,10 +295,32 @@ class BearingExtractor:
                 and not is_squeezed(b, others, kin=kin, **fringe)
                 and not is_covered(b, other_codes)
             ]
+            n_fringes = len(blobs) - len(kept)
+            kept, rejected = self._gate(cls.label, kept)
             out[cls.label] = ClassSightings(
-                cls.label, cls.landmarks, tuple(kept), largest, len(blobs) - len(kept), True
+                cls.label, cls.landmarks, tuple(kept), largest, n_fringes, True, rejected
             )
         return out
+
+    def _gate(
+        self, label: str, blobs: list[Blob]
+    ) -> tuple[list[Blob], tuple[tuple[Blob, str], ...]]:
+        """``blobs`` split into those a landmark of class ``label`` can be and the others, each
+        with the reason: of a size no landmark of the class can have, or (pinhole) cut by the
+        image's edge."""
+        gate = self._gates[label]
+        layout = self._layout
+        edge = layout if isinstance(layout, PinholeLayout) else None
+        if gate is None and edge is None:
+            return blobs, ()
+        why = [
+            "cut by the image's edge"
+            if edge is not None and edge.cut_by_edge(b.bearing_rad, b.width_rad)
+            else (gate.problem(b) if gate is not None else None)
+            for b in blobs
+        ]
+        kept = [b for b, w in zip(blobs, why, strict=True) if w is None]
+        return kept, tuple((b, w) for b, w in zip(blobs, why, strict=True) if w is not None)
 
     def _within(self, blob: Blob, code: Blob) -> bool:
         """True if single-colour ``blob`` lies inside coded ``code``'s bearings: one of its bands

@@ -131,6 +131,18 @@ class PinholeLayout(PixelLayout):
 
     calibration: PinholeCalibration
     field_of_view_rad: tuple[float, float]
+    #: bearings (rad) seen in every row: where distortion bends the image's left and right
+    #: edges, the view is narrower in some rows than in others
+    inner_view_rad: tuple[float, float]
+
+    def cut_by_edge(self, bearing_rad: float, width_rad: float) -> bool:
+        """True if a blob at ``bearing_rad``, ``width_rad`` wide, reaches within a sector of
+        the image's left or right edge: part of it may lie outside, and its bearing with it."""
+        lo, hi = self.inner_view_rad
+        reach = 0.5 * width_rad + self.bin_width_rad
+        centre = 0.5 * (lo + hi)
+        off = float(wrap_rad(bearing_rad - centre))
+        return off + reach >= hi - centre or off - reach <= lo - centre
 
     @property
     def gap_bins(self) -> int:
@@ -207,4 +219,5 @@ def _pinhole_layout(cal: PinholeCalibration) -> PinholeLayout:
         n_rows=cal.height,
         calibration=cal,
         field_of_view_rad=field_of_view_rad(cal),
+        inner_view_rad=(float(bearing[:, -1].max()), float(bearing[:, 0].min())),
     )

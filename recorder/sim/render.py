@@ -41,7 +41,8 @@ renders in a few hundred microseconds.
 Public API
 ----------
 :func:`render_panorama` -> :class:`RenderedFrame` (``image_bgr`` and ``truth``, one
-:class:`LandmarkTruth` per landmark), :class:`Lighting`, :func:`truncated_normal`.
+:class:`LandmarkTruth` per landmark), :class:`Lighting`, :class:`Backdrop` (floor and wall
+colours), :func:`truncated_normal`.
 """
 
 from __future__ import annotations
@@ -99,6 +100,16 @@ class Lighting:
     gain_jitter: float = 0.12
     gradient: float = 0.10
     direction_rad: float = 0.7
+
+
+@dataclass(frozen=True)
+class Backdrop:
+    """Colours (B, G, R) of the floor and the arena wall, instead of the default unsaturated
+    ones: a scene whose floor or wall looks like a landmark colour (for tests of colour under
+    real light)."""
+
+    floor_bgr: tuple[float, float, float] = _FLOOR_BGR
+    wall_bgr: tuple[float, float, float] = _WALL_BGR
 
 
 @dataclass(frozen=True)
@@ -178,6 +189,7 @@ def render_panorama(
     vision_error_rad: float,
     pixel_noise: float = 2.0,
     lighting: Lighting | None = None,
+    backdrop: Backdrop | None = None,
 ) -> RenderedFrame:
     """Render the panoramic frame seen from ``pose_world``.
 
@@ -199,12 +211,14 @@ def render_panorama(
         Std of the pixel noise, grey levels (0 = none).
     lighting : Lighting or None
         Lighting variation; None = constant lighting.
+    backdrop : Backdrop or None
+        Floor and wall colours; None = the default unsaturated ones.
 
     Returns
     -------
     RenderedFrame
     """
-    tables = _tables(calibration)
+    tables = _tables(calibration, backdrop or Backdrop())
     n = len(world.landmarks)
     true_rad = world.bearings_rad(pose_world)
     range_m = world.ranges_m(pose_world)
@@ -499,14 +513,14 @@ class _PinholeTables(_Tables):
 
 
 def _background_color(
-    bearing_rad: NDArray[np.float64], elevation_rad: NDArray[np.float64]
+    bearing_rad: NDArray[np.float64], elevation_rad: NDArray[np.float64], backdrop: Backdrop
 ) -> NDArray[np.float32]:
     """Background colour (..., 3) float32 at the given bearings/elevations (same shape)."""
     wall_lo, wall_hi = _WALL_BAND_RAD
     out = np.empty((*bearing_rad.shape, 3), np.float32)
     out[...] = _ROOM_BGR
-    out[elevation_rad < wall_hi] = _WALL_BGR
-    out[elevation_rad < wall_lo] = _FLOOR_BGR
+    out[elevation_rad < wall_hi] = backdrop.wall_bgr
+    out[elevation_rad < wall_lo] = backdrop.floor_bgr
     tex_rng = np.random.default_rng(_TEXTURE_SEED)
     shade = np.ones(bearing_rad.shape)
     for _ in range(4):  # smooth blotches; integer angular frequencies keep the seam continuous
@@ -539,7 +553,7 @@ def _per_channel(values: NDArray[np.float64]) -> NDArray[np.float32]:
 
 
 @lru_cache(maxsize=8)
-def _tables(calibration: Calibration) -> _Tables:
+def _tables(calibration: Calibration, backdrop: Backdrop) -> _Tables:
     w, h = calibration.width, calibration.height
     noise = _noise_table(w * h)
     full = ELEVATION_MAX_RAD - ELEVATION_MIN_RAD
@@ -548,18 +562,20 @@ def _tables(calibration: Calibration) -> _Tables:
         row_e = ELEVATION_MAX_RAD - (np.arange(h) + 0.5) / h * full
         b_grid, e_grid = np.meshgrid(col_b, row_e)
         return _Tables(
-            _background_color(b_grid, e_grid),
+            _background_color(b_grid, e_grid, backdrop),
             _per_channel(np.cos(col_b))[None, :],
             _per_channel(np.sin(col_b))[None, :],
             noise,
         )
     if isinstance(calibration, PinholeCalibration):
-        return _pinhole_tables(calibration, noise)
+        return _pinhole_tables(calibration, noise, backdrop)
     assert isinstance(calibration, OmniCalibration)
-    return _omni_tables(calibration, noise)
+    return _omni_tables(calibration, noise, backdrop)
 
 
-def _pinhole_tables(cal: PinholeCalibration, noise: NDArray[np.float32]) -> _PinholeTables:
+def _pinhole_tables(
+    cal: PinholeCalibration, noise: NDArray[np.float32], backdrop: Backdrop
+) -> _PinholeTables:
     ys, xs = np.mgrid[0 : cal.height, 0 : cal.width].astype(np.float64) + 0.5
     xn, yn = rays_of_pixels(cal, xs, ys)
     rel = -np.arctan(xn)  # bearing relative to the optical axis, CCW positive (left)
@@ -569,7 +585,7 @@ def _pinhole_tables(cal: PinholeCalibration, noise: NDArray[np.float32]) -> _Pin
     step_e = np.abs(np.gradient(elev, axis=0)) if cal.height > 1 else np.full_like(elev, 1e-3)
     pad_b, pad_e = 1.5 * float(step_b.max()), 1.5 * float(step_e.max())
     return _PinholeTables(
-        background=_background_color(bearing, elev),
+        background=_background_color(bearing, elev, backdrop),
         cos_bearing=_per_channel(np.cos(bearing)),
         sin_bearing=_per_channel(np.sin(bearing)),
         noise=noise,
@@ -588,7 +604,9 @@ def _pinhole_tables(cal: PinholeCalibration, noise: NDArray[np.float32]) -> _Pin
     )
 
 
-def _omni_tables(cal: OmniCalibration, noise: NDArray[np.float32]) -> _OmniTables:
+def _omni_tables(
+    cal: OmniCalibration, noise: NDArray[np.float32], backdrop: Backdrop
+) -> _OmniTables:
     w, h = cal.width, cal.height
     ys, xs = np.mgrid[0:h, 0:w]
     x, y = xs + 0.5, ys + 0.5  # continuous coordinates of pixel centres
@@ -597,7 +615,7 @@ def _omni_tables(cal: OmniCalibration, noise: NDArray[np.float32]) -> _OmniTable
     elev = ELEVATION_MIN_RAD + (radius - cal.r_min) / (cal.r_max - cal.r_min) * (
         ELEVATION_MAX_RAD - ELEVATION_MIN_RAD
     )
-    background = _background_color(bearing, elev)
+    background = _background_color(bearing, elev, backdrop)
     background[radius < cal.r_min] = _BODY_BGR
     background[radius >= cal.r_max] = _OUTSIDE_BGR
 

@@ -55,6 +55,7 @@ _stop_signal: list[int] = []
 COMMANDS: dict[str, str] = {
     "info": "replay.cli.info:info",
     "import": "replay.cli.import_cmd:import_group",
+    "calibrate": "replay.cli.calibrate:calibrate",
     "cat": "replay.cli.cat:cat",
     "split": "replay.cli.parts:split",
     "merge": "replay.cli.parts:merge",

@@ -128,3 +128,33 @@ def test_provenance_and_truth_are_checked() -> None:
         session_from_doc(_no_camera() | {"truth": unknown})
     with pytest.raises(SchemaError, match="importer_version"):
         session_from_doc(_no_camera() | {"provenance": {"kind": "csv", "files": []}})
+
+
+def test_band_boxes_sizes_and_range_round_trip() -> None:
+    """A coded landmark's per-band HSV boxes, landmark sizes and the catalog's range_m are
+    read into the typed view and written back unchanged by the recorder's catalog entries."""
+    from recorder.session import landmark_entry
+
+    entries = [
+        {"name": "L1", "color": "red", "hsv": {"lo": [170, 100, 40], "hi": [8, 255, 255]}},
+        {
+            "name": "L2",
+            "bands": ["green", "magenta"],
+            "hsv": [
+                {"lo": [50, 90, 40], "hi": [70, 255, 255]},
+                {"lo": [140, 90, 40], "hi": [160, 255, 255]},
+            ],
+            "width": 0.05,
+            "height": 0.3,
+        },
+    ]
+    s = session_from_doc(_doc() | {"landmarks": entries, "range_m": [0.2, 4.0]})
+    assert s.range_m == (0.2, 4.0)
+    assert s.landmarks[1].band_hsv == (
+        ((50, 90, 40), (70, 255, 255)),
+        ((140, 90, 40), (160, 255, 255)),
+    )
+    assert (s.landmarks[1].width_m, s.landmarks[1].height_m) == (0.05, 0.3)
+    assert [landmark_entry(lm) for lm in s.landmarks] == entries
+    with pytest.raises(SchemaError, match="'range_m': nearest 4 m must be below farthest 2 m"):
+        session_from_doc(_doc() | {"range_m": [4.0, 2.0]})

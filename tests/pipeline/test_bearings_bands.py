@@ -230,7 +230,23 @@ def test_single_colour_landmarks_are_not_taken_from_bands() -> None:
         (LandmarkSpec("L9", None, bands=("red", "teal")), "unknown colour 'teal'"),
         (
             LandmarkSpec("L9", None, (0, 90, 50), (10, 255, 255), bands=("red", "blue")),
-            "HSV override is for a single-colour landmark",
+            "is coded: give 'hsv' as a list of 2 boxes",
+        ),
+        (
+            LandmarkSpec(
+                "L9", None, bands=("red", "blue"), band_hsv=(((0, 90, 50), (10, 255, 255)),)
+            ),
+            "2 bands but 1 HSV boxes",
+        ),
+        (
+            LandmarkSpec(
+                "L9", None, bands=("red", "blue"), band_hsv=(((0, 90, 50), (10, 255)),) * 2
+            ),
+            "need 3 values",
+        ),
+        (
+            LandmarkSpec("L9", "red", band_hsv=(((0, 90, 50), (10, 255, 255)),) * 2),
+            "one colour: give 'hsv' one box",
         ),
     ],
 )
@@ -238,6 +254,28 @@ def test_bad_codes_raise_one_clear_line(spec: LandmarkSpec, message: str) -> Non
     with pytest.raises(LandmarkCatalogError, match=message) as info:
         BearingExtractor(UnwrappedCalibration(32, 8), [spec])
     assert "\n" not in str(info.value) and "L9" in str(info.value)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_each_band_is_found_by_its_own_box(model: str) -> None:
+    """A code's per-band boxes replace its colours' defaults: a yellow band's box moved to cyan
+    hues (80..100) loses the code; one around yellow (24..36) reads it; a single-colour
+    yellow landmark keeps the default yellow box all along."""
+    cal = CALIBRATIONS[model]
+    code = Landmark("A", 1.2, 0.5, None, bands=("magenta", "yellow"))
+    plain = Landmark("Y", 0.3, 0.5, "yellow")
+    frame = _render(SimWorld(ARENA, (code, plain)), cal, (0.75, 0.55, 0.0), 9)
+    magenta = ((140, 90, 50), (160, 255, 255))
+
+    def found(yellow_box: tuple[tuple[int, int, int], tuple[int, int, int]]) -> dict:  # type: ignore[type-arg]
+        spec = LandmarkSpec("A", None, bands=code.bands, band_hsv=(magenta, yellow_box))
+        return BearingExtractor(cal, [spec, _spec(plain)]).extract(frame.image_bgr)
+
+    off = found(((80, 90, 50), (100, 255, 255)))
+    assert off["A"].bearing_rad is None and off["Y"].bearing_rad is not None
+    on = found(((24, 90, 50), (36, 255, 255)))
+    err = _err_deg(on["A"].bearing_rad or 99.0, frame.landmark("A").bearing_drawn_rad)
+    assert abs(err) < 0.5 and on["Y"].bearing_rad is not None
 
 
 @pytest.mark.parametrize("model", MODELS)
