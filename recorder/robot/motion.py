@@ -17,20 +17,47 @@ from collections.abc import Callable
 
 from recorder.clock import Clock
 from recorder.robot.base import Robot, RobotConfig
-from recorder.robot.errors import RobotTimeout
+from recorder.robot.errors import RobotConfigError, RobotTimeout
 
 #: Slack added to twice the nominal duration of a move before it counts as stuck, seconds.
 MOVE_TIMEOUT_SLACK_S = 2.0
 
 
+#: The largest wheel travel of one position move, pulses (the robot's signed 32-bit counter).
+MAX_PULSES = 2**31 - 1
+
+
+def _whole_pulses(travel: float, what: str) -> int:
+    """``travel`` (pulses) rounded, refused unless the robot's counter can hold it."""
+    if not abs(travel) <= MAX_PULSES:  # also NaN and infinities
+        raise RobotConfigError(
+            f"{what} needs {travel:.3g} encoder pulses, beyond the robot's counter "
+            f"({MAX_PULSES}); ask for a shorter move or check --mm-per-pulse"
+        )
+    return round(travel)
+
+
 def pulses_for_distance(config: RobotConfig, distance_m: float) -> int:
-    """Wheel travel for a straight move of ``distance_m`` metres, whole pulses."""
-    return round(distance_m / config.m_per_pulse)
+    """Wheel travel for a straight move of ``distance_m`` metres, whole pulses.
+
+    Raises
+    ------
+    RobotConfigError
+        The travel does not fit the robot's position counter (:data:`MAX_PULSES`).
+    """
+    return _whole_pulses(distance_m / config.m_per_pulse, f"a drive of {distance_m:.3g} m")
 
 
 def pulses_for_turn(config: RobotConfig, angle_rad: float) -> int:
-    """Right-wheel travel (left = minus this) for a turn in place by ``angle_rad``, whole pulses."""
-    return round(angle_rad * config.wheel_base_m / 2.0 / config.m_per_pulse)
+    """Right-wheel travel (left = minus this) for a turn in place by ``angle_rad``, whole pulses.
+
+    Raises
+    ------
+    RobotConfigError
+        The travel does not fit the robot's position counter (:data:`MAX_PULSES`).
+    """
+    travel = angle_rad * config.wheel_base_m / 2.0 / config.m_per_pulse
+    return _whole_pulses(travel, f"a turn of {angle_rad:.3g} rad")
 
 
 def move_timeout_s(config: RobotConfig, pulses: int) -> float:

@@ -14,6 +14,10 @@ if TYPE_CHECKING:
     from data_schemas.registry import ImageEncoding
 
 
+#: The longest straight drive ``--distance`` accepts, metres (a robot in a lab or a field).
+MAX_DRIVE_M = 100.0
+
+
 def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tuple[float, float]:
     parts = text.split(",")
     try:
@@ -22,8 +26,10 @@ def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tu
         raise click.BadParameter(f"expected D or MIN,MAX in metres, got {text!r}") from None
     if len(values) == 1:
         values = values * 2
-    if len(values) != 2 or not 0 < values[0] <= values[1] < math.inf:
-        raise click.BadParameter(f"expected D or MIN,MAX with 0 < MIN <= MAX, got {text!r}")
+    if len(values) != 2 or not 0 < values[0] <= values[1] <= MAX_DRIVE_M:
+        raise click.BadParameter(
+            f"expected D or MIN,MAX with 0 < MIN <= MAX <= {MAX_DRIVE_M:g} m, got {text[:40]!r}"
+        )
     return values[0], values[1]
 
 
@@ -70,7 +76,7 @@ def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tu
 @frame_options
 @click.option(
     "--baud",
-    type=click.IntRange(min=1),
+    type=click.IntRange(min=1, max=4_000_000),
     default=9600,
     show_default=True,
     help="Serial baud rate of the robot's running mode (Khepera II: 9600 to 115200).",

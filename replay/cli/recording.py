@@ -34,7 +34,7 @@ def frame_options(func: F) -> F:
             click.option(
                 "--rate",
                 "frame_rate_hz",
-                type=FiniteFloat(min=0, min_open=True),
+                type=FiniteFloat(min=0, min_open=True, max=1000),
                 default=5.0,
                 show_default=True,
                 help="Frames per second while driving (virtual time when simulating).",

@@ -12,6 +12,7 @@ from __future__ import annotations
 import fcntl
 import hashlib
 import json
+import math
 import os
 import signal
 import stat
@@ -30,6 +31,9 @@ from data_schemas.mcap.compression import MAX_CHUNK_BYTES, DecompressionError, d
 from data_schemas.mcap.writer import LogWriter
 from data_schemas.outputs import OutputGuard, create_new
 from recorder.clock import VirtualClock
+from recorder.robot.base import RobotConfig
+from recorder.robot.errors import RobotConfigError
+from recorder.robot.motion import pulses_for_distance, pulses_for_turn
 from replay.cli import cli
 from tests.hostile import MAGIC, log_with_chunk, nested_text, run_bslam, session_json
 from tests.replay.logfactory import session_doc
@@ -252,6 +256,25 @@ def test_absurd_camera_noise_is_refused_at_entry(tmp_path: Path, key: str, value
     result = CliRunner().invoke(cli, ["simulate", "--scenario", str(path), "--out", "x.mcap"])
     assert result.exit_code == 1 and "maximum" in result.output, result.output
     assert not (tmp_path / "x.mcap").exists()
+
+
+def test_record_refuses_an_absurd_distance_before_any_log(tmp_path: Path) -> None:
+    out = tmp_path / "run.mcap"
+    args = ["record", "--port", "x", "--camera", "0", "--out", str(out)]
+    args += ["--calibration", "c.json", "--landmarks", "l.json", "--distance", "1e308"]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 2 and "MAX <= 100 m" in result.output, result.output
+    assert not out.exists()
+
+
+def test_a_move_the_robot_cannot_count_is_refused() -> None:
+    config = RobotConfig(port="sim", mm_per_pulse=0.08)
+    assert pulses_for_distance(config, 1.0) == 12_500  # 1000 mm / 0.08 mm
+    for distance_m in (1e308, math.inf, math.nan, 0.08e-3 * 2**31):
+        with pytest.raises(RobotConfigError, match="beyond the robot's counter"):
+            pulses_for_distance(config, distance_m)
+    with pytest.raises(RobotConfigError):
+        pulses_for_turn(RobotConfig(port="sim", mm_per_pulse=1e-300), 1.0)
 
 
 # ------------------------------------------------------------------ special files
