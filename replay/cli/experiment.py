@@ -58,13 +58,19 @@ def _priors(ctx: click.Context, param: click.Parameter, text: str) -> tuple[str,
 
 
 def _out_dir(out: Path, force: bool) -> Path:
-    """``--out``, checked; the experiment makes it once every input has been validated."""
-    if out.exists() and not out.is_dir():
-        raise ExperimentArgumentError(f"--out {out}: is a file; give a folder for the outputs")
-    if out.is_dir() and any(out.iterdir()) and not force:
+    """``--out``, checked and made (an empty folder) before any work."""
+    try:
+        if out.exists() and not out.is_dir():
+            raise ExperimentArgumentError(f"--out {out}: is a file; give a folder for the outputs")
+        if out.is_dir() and any(out.iterdir()) and not force:
+            raise ExperimentArgumentError(
+                f"--out {out}: the folder holds earlier results; pass --force to replace them"
+            )
+        out.mkdir(parents=True, exist_ok=True)  # a folder that cannot be made: one line now
+    except OSError as exc:
         raise ExperimentArgumentError(
-            f"--out {out}: the folder holds earlier results; pass --force to replace them"
-        )
+            f"--out: cannot make the folder {str(out)[:200]}: {exc.strerror or exc}"
+        ) from None
     return out
 
 

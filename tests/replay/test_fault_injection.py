@@ -354,6 +354,17 @@ def test_outputs_follow_the_umask(small_log: Path, tmp_path: Path, mask: int) ->
     assert stat.S_IMODE((tmp_path / "s.json").stat().st_mode) == 0o666 & ~mask
 
 
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+@pytest.mark.slow  # the experiment command loads matplotlib and Dask
+def test_an_experiment_folder_that_cannot_be_made_is_one_line(tmp_path: Path) -> None:
+    too_long = tmp_path.joinpath(*["d" * 200] * 25)  # over PATH_MAX (4096)
+    for out in (Path("/proc/no_folder_here"), too_long):
+        result = CliRunner().invoke(cli, ["experiment", "paper", "--out", str(out), "--runs", "1"])
+        assert result.exit_code == 1, result.output
+        assert result.output.startswith("Error: --out: cannot make the folder"), result.output
+        assert result.output.count("\n") == 1 and len(result.output) < 400
+
+
 # ------------------------------------------------------------------ a log being recorded
 def test_info_on_a_log_being_recorded(tmp_path: Path) -> None:
     log = tmp_path / "run.mcap"
