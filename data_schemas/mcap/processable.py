@@ -297,6 +297,8 @@ class ProcessableLog(Closing):
                 )
                 for c, problem in exc.chunks
             ]
+            # what info and recover say of the same damage (salvage counted by one scan)
+            damage = _scanned_damage(self.path) or damage
             raise CorruptLogError(corrupt_log_line(self.name, damage, self._advice)) from None
         except DamagedLogError as exc:
             raise CorruptLogError(
@@ -342,3 +344,12 @@ class ProcessableLog(Closing):
         if self._index is not None:
             self._index.close()
         self._file.close()
+
+
+def _scanned_damage(path: Path) -> list[Damage]:
+    """The corruption a full scan of ``path`` finds, with its salvage counts (the numbers
+    ``bslam info`` and ``bslam recover`` give); read only once the index found damage."""
+    with LogScan(path) as scan:
+        for _ in scan.records():
+            pass
+        return corruption(scan.damage)

@@ -390,6 +390,26 @@ def test_recover_refuses_a_file_of_magic_bytes(tmp_path: Path) -> None:
     assert _only(tmp_path) == ["magic.mcap"]
 
 
+def test_every_command_counts_salvage_the_same(small_log: Path, tmp_path: Path) -> None:
+    data = bytearray(small_log.read_bytes())
+    frame = data.index(b'"data":"iVBOR')  # a PNG frame's base64 text, inside a message
+    data[frame + 200] ^= 0xFF  # not UTF-8 any more: that one message cannot decode
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(bytes(data))
+    with small_log.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    total = summary.statistics.message_count  # one chunk in this log: all its messages
+    runner = CliRunner()
+    said = [
+        runner.invoke(cli, ["info", str(broken)]).output,
+        runner.invoke(cli, ["process", str(broken)]).output,
+        runner.invoke(cli, ["recover", str(broken), str(tmp_path / "r.mcap")]).output,
+    ]
+    expected = f"{total - 1} of {total} messages salvaged (1 more dropped"
+    assert all(expected in text for text in said), said
+
+
 # ------------------------------------------------------------------ signals at start-up
 # (earlier than ~0.2 s the interpreter itself is starting: Python's own start-up, not ours)
 @pytest.mark.parametrize(
