@@ -58,7 +58,7 @@ def _priors(ctx: click.Context, param: click.Parameter, text: str) -> tuple[str,
 
 
 def _out_dir(out: Path, force: bool) -> Path:
-    """``--out``, checked and made (an empty folder) before any work."""
+    """``--out``, checked before any work (including that it can be made)."""
     try:
         if out.exists() and not out.is_dir():
             raise ExperimentArgumentError(f"--out {out}: is a file; give a folder for the outputs")
@@ -66,12 +66,26 @@ def _out_dir(out: Path, force: bool) -> Path:
             raise ExperimentArgumentError(
                 f"--out {out}: the folder holds earlier results; pass --force to replace them"
             )
-        out.mkdir(parents=True, exist_ok=True)  # a folder that cannot be made: one line now
+        _can_make(out)
     except OSError as exc:
         raise ExperimentArgumentError(
             f"--out: cannot make the folder {str(out)[:200]}: {exc.strerror or exc}"
         ) from None
     return out
+
+
+def _can_make(out: Path) -> None:
+    """Make the folders missing on the way to ``out`` and remove them again (OSError if one
+    cannot be made): the experiment makes them once every input has been validated."""
+    missing = []
+    for folder in (out, *out.parents):
+        if folder.exists():
+            break
+        missing.append(folder)
+    for folder in reversed(missing):
+        folder.mkdir()
+    for folder in missing:
+        folder.rmdir()
 
 
 def _common(fn: Any) -> Any:
