@@ -44,6 +44,9 @@ class Detection:
     ambiguous : bool
         True if other catalog landmarks share this landmark's class: then no bearing is given
         (``visible`` False, ``reason`` says so) until something associates the blobs.
+    rejected : tuple of (Blob, str)
+        Blobs of its class rejected (a size no landmark of the class can have, cut by the
+        image's edge), each with the reason (:attr:`ClassSightings.rejected`).
     """
 
     name: str
@@ -57,6 +60,7 @@ class Detection:
     second_bearing_rad: float | None = None
     blobs: tuple[Blob, ...] = ()
     ambiguous: bool = False
+    rejected: tuple[tuple[Blob, str], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -108,7 +112,7 @@ def detection_of(name: str, sightings: ClassSightings, *, min_pixels: int) -> De
         if not det.visible and sightings.rejected:
             n, why = len(sightings.rejected), sightings.rejected[0][1]
             det = replace(det, reason=f"no blob of a landmark's size ({n} rejected; {why})")
-        return replace(det, blobs=sightings.blobs)
+        return replace(det, blobs=sightings.blobs, rejected=sightings.rejected)
     others = ", ".join(n for n in sightings.landmarks if n != name)
     reason = (
         f"ambiguous: class {sightings.label} is shared with {others} "
@@ -116,7 +120,18 @@ def detection_of(name: str, sightings: ClassSightings, *, min_pixels: int) -> De
     )
     n_pixels = blobs[0].n_pixels if blobs else sightings.largest
     return Detection(
-        name, False, None, 0.0, 0.0, n_pixels, len(blobs), reason, None, sightings.blobs, True
+        name,
+        False,
+        None,
+        0.0,
+        0.0,
+        n_pixels,
+        len(blobs),
+        reason,
+        None,
+        sightings.blobs,
+        True,
+        sightings.rejected,
     )
 
 

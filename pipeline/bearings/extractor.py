@@ -49,12 +49,16 @@ def check_image(image_bgr: object, calibration: Calibration) -> NDArray[np.uint8
     Raises
     ------
     ImageError
-        Not an array, wrong dtype, not 3-channel BGR, or a size other than the calibration's.
+        Not an array, wrong dtype, not 3-channel BGR, a greyscale frame (one channel, or three
+        equal channels that are not uniform: landmarks are found by colour), or a size other
+        than the calibration's.
     """
     if not isinstance(image_bgr, np.ndarray):
         raise ImageError(f"image must be a numpy array, got {type(image_bgr).__name__}")
     if image_bgr.dtype != np.uint8:
         raise ImageError(f"image must be uint8 BGR, got dtype {image_bgr.dtype}")
+    if image_bgr.ndim == 2 or (image_bgr.ndim == 3 and image_bgr.shape[2] == 1):
+        raise ImageError(f"image is greyscale (shape {image_bgr.shape}): {_GREY}")
     if image_bgr.ndim != 3 or image_bgr.shape[2] != 3:
         raise ImageError(f"image must have shape (H, W, 3) (BGR), got {image_bgr.shape}")
     h, w = image_bgr.shape[:2]
@@ -63,7 +67,24 @@ def check_image(image_bgr: object, calibration: Calibration) -> NDArray[np.uint8
             f"image is {w}x{h} (width x height) but the camera calibration is "
             f"{calibration.width}x{calibration.height}; use the calibration of this camera"
         )
+    if _is_grey(image_bgr):
+        raise ImageError(f"frame is greyscale (its three channels are equal): {_GREY}")
     return image_bgr
+
+
+_GREY = (
+    "landmarks are found by their colours, which a greyscale frame does not have; record "
+    "colour frames"
+)
+
+
+def _is_grey(image: NDArray[np.uint8]) -> bool:
+    """True if the three channels are equal and the frame is not uniform (a black or blank
+    frame from a colour camera is not taken for greyscale)."""
+    blue, green = image[..., 0], image[..., 1]
+    if not (np.array_equal(blue, green) and np.array_equal(green, image[..., 2])):
+        return False
+    return int(blue.max()) - int(blue.min()) > 8
 
 
 class BearingExtractor:

@@ -103,6 +103,7 @@ class ImageFolderImporter:
             landmarks=[landmark_entry(lm) for lm in catalog.landmarks],
             reference=catalog.reference,
             vision_error_deg=math.degrees(catalog.vision_error_rad),
+            range_m=catalog.range_m,
             camera=camera,
         )
         placeholders = [Message(t, "/camera/panorama", {"path": str(p)}) for t, p in frames]

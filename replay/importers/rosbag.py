@@ -139,6 +139,7 @@ class RosbagImporter:
             landmarks=[landmark_entry(lm) for lm in catalog.landmarks],
             reference=catalog.reference,
             vision_error_deg=math.degrees(catalog.vision_error_rad),
+            range_m=catalog.range_m,
             camera=camera,
         )
         notes = [f"{n_frames} frames from {image.topic}, {n_odom} poses from {odom.topic}"]

@@ -120,6 +120,7 @@ def imported_session(
     vision_error_deg: float,
     truth: dict[str, Any] | None = None,
     camera: dict[str, Any] | None = None,
+    range_m: tuple[float, float] | None = None,
 ) -> dict[str, Any]:
     """The session document of an imported log (no robot), validated.
 
@@ -146,6 +147,8 @@ def imported_session(
     camera : dict, optional
         The session's ``camera`` (source, calibration, encoding, frame rate) if frames are
         imported.
+    range_m : (float, float), optional
+        The catalog's nearest and farthest distance landmarks are seen from (the size gate).
     """
     doc: dict[str, Any] = {
         "schema_version": SCHEMA_VERSION,
@@ -167,6 +170,8 @@ def imported_session(
         doc["truth"] = truth
     if camera is not None:
         doc["camera"] = camera
+    if range_m is not None:
+        doc["range_m"] = list(range_m)
     try:
         session_from_doc(doc, what=f"{kind} import")
     except BslamError as exc:

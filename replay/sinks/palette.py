@@ -9,6 +9,7 @@ from pipeline.association.tracker import slot_name
 ELLIPSE_RGB = (190, 150, 255)  # 80% regions: a hue no landmark class uses
 TRUTH_RGB = (240, 240, 240)
 TRAJECTORY_RGB = (255, 160, 0)
+REJECTED_RGB = (128, 128, 128)  # blobs rejected as landmarks: grey
 
 
 def landmark_rgb(session: Session) -> dict[str, tuple[int, int, int]]:

@@ -6,7 +6,9 @@ Entities (the blueprint in :mod:`replay.blueprint` lays them out):
 =============================== ===================================================
 ``camera/panorama``             the frame (the logged PNG as is; raw frames as BGR pixels), with
                                 ``/masks`` (segmentation, one class per landmark) and
-                                ``/detections`` (a line per bearing, labelled)
+                                ``/detections`` (a line per bearing, labelled) and
+                                ``/rejected`` (a line per blob rejected, labelled with the
+                                reason: a size no landmark can have, cut by the image's edge)
 ``bearings/<name>``             bearing in degrees over time
 ``fr/cones/<name>``             per movement, the two vision cones (FR: O1 = (0, 0), O2 = (1, 0))
 ``fr/particles/<name>``         per movement, the particles drawn in the cones' intersection
@@ -54,7 +56,13 @@ from replay.records import (
     MovementRecord,
     RunInfo,
 )
-from replay.sinks.palette import ELLIPSE_RGB, TRAJECTORY_RGB, TRUTH_RGB, landmark_rgb
+from replay.sinks.palette import (
+    ELLIPSE_RGB,
+    REJECTED_RGB,
+    TRAJECTORY_RGB,
+    TRUTH_RGB,
+    landmark_rgb,
+)
 from replay.truth import errors_m
 
 LOG_TIME = "log_time"
@@ -112,6 +120,7 @@ class _FrameBatch:
     png: dict[int, bytes] = field(default_factory=dict)
     labels: dict[int, NDArray[np.uint8]] = field(default_factory=dict)  # (H, W) class ids
     detections: dict[int, dict[str, float]] = field(default_factory=dict)  # name -> bearing
+    rejected: dict[int, list[tuple[float, str]]] = field(default_factory=dict)  # bearing, why
     bearings_deg: dict[str, dict[int, float]] = field(default_factory=dict)
 
     def add_row(self, log_time_ns: int, movement: int | None) -> int:
@@ -189,6 +198,8 @@ class RerunSink:
             log("camera/panorama/masks", masks, static=True)
         lines = rr.LineStrips2D.from_fields(radii=rr.Radius.ui_points(1.5))
         log("camera/panorama/detections", lines, static=True)
+        gone = rr.LineStrips2D.from_fields(radii=rr.Radius.ui_points(1.0), colors=[REJECTED_RGB])
+        log("camera/panorama/rejected", gone, static=True)
         for name in self._rgb:  # the catalog, then names given by association (red#1, ...)
             series = rr.SeriesPoints(colors=[self._rgb[name]], names=[name], marker_sizes=[2.0])
             log(f"bearings/{name}", series, static=True)
@@ -259,6 +270,11 @@ class RerunSink:
         }
         if frame.image_bgr is not None:
             batch.detections[row] = seen
+            rejected = {
+                (b.bearing_rad, why) for d in frame.detections.values() for b, why in d.rejected
+            }
+            if rejected:
+                batch.rejected[row] = sorted(rejected)
         for name, b in seen.items():
             batch.bearings_deg.setdefault(name, {})[row] = math.degrees(b)
         if len(batch.log_time_ns) >= BATCH_FRAMES:
@@ -286,6 +302,15 @@ class RerunSink:
                 labels=[f"{n} {math.degrees(b):.1f}°" for d in seen for n, b in d.items()],
             )
             send("camera/panorama/detections", times, strips.partition([len(d) for d in seen]))
+        for rows, times in batch.timed(batch.rejected):
+            if cal is None:
+                break
+            gone = [batch.rejected[r] for r in rows]
+            strips = rr.LineStrips2D.columns(
+                strips=[s for g in gone for s in detection_segments(cal, [b for b, _ in g])],
+                labels=[f"rejected: {why}" for g in gone for _, why in g],
+            )
+            send("camera/panorama/rejected", times, strips.partition([len(g) for g in gone]))
         for name, values in batch.bearings_deg.items():
             for rows, times in batch.timed(values):
                 degrees = rr.Scalars.columns(scalars=[values[r] for r in rows])

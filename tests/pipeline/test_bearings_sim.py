@@ -272,7 +272,8 @@ def test_extract_with_masks_is_extract_and_masks(model: str) -> None:
     ("image", "message"),
     [
         (np.zeros((HEIGHT, WIDTH, 3), np.float32), "uint8 BGR, got dtype float32"),
-        (np.zeros((HEIGHT, WIDTH), np.uint8), r"shape \(H, W, 3\)"),
+        (np.zeros((HEIGHT, WIDTH), np.uint8), r"image is greyscale \(shape \(176, 255\)\)"),
+        (np.zeros((HEIGHT, WIDTH, 4), np.uint8), r"shape \(H, W, 3\)"),
         (np.zeros((HEIGHT, WIDTH, 4), np.uint8), r"got \(176, 255, 4\)"),
         (np.zeros((WIDTH, HEIGHT, 3), np.uint8), "is 176x255 .* calibration is 255x176"),
         ([[0, 0, 0]], "numpy array, got list"),

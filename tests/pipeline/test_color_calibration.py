@@ -371,3 +371,20 @@ def test_a_landmark_cut_by_the_image_edge_gives_no_bearing() -> None:
             assert got.bearing_rad == pytest.approx(
                 bearing - math.radians(heading_deg), abs=0.1 * DEG
             )
+
+
+def test_greyscale_frames_are_refused_for_colour_landmarks() -> None:
+    """A greyscale frame (one channel, or three equal ones as importers store it) cannot show
+    colours: one line says so; a uniform black frame from a colour camera is not refused."""
+    from data_schemas.calibration import UnwrappedCalibration
+
+    image, _ = _plain_frame()
+    extractor = BearingExtractor(UnwrappedCalibration(80, 60), [LandmarkSpec("R", "red")])
+    grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    for frame in (grey, grey[..., None], cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)):
+        with pytest.raises(ImageError, match="greyscale") as info:
+            extractor.extract(frame)
+        assert "\n" not in str(info.value) and "record colour frames" in str(info.value)
+    black = np.zeros_like(image)
+    assert extractor.extract(black)["R"].reason == "no pixels of its colour"
+    assert extractor.extract(image)["R"].bearing_rad is not None

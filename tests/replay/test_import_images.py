@@ -91,3 +91,23 @@ def test_bad_timestamps_and_images(tmp_path: Path) -> None:
         result.exit_code == 1 and "a.png is 10 x 4, but the calibration is 12 x 4" in result.output
     )
     assert not (tmp_path / "out.mcap").exists()
+
+
+def test_the_catalog_range_sizes_and_band_boxes_reach_the_log(tmp_path: Path) -> None:
+    """What ``calibrate colors`` and the size gate read (``range_m``, widths, a box per band)
+    is carried from the landmark file into the imported session."""
+    args = _folder(tmp_path, "file,t_s\na.png,1.0\nb.png,1.25\n")
+    boxes = [
+        {"lo": [50, 90, 40], "hi": [70, 255, 255]},
+        {"lo": [110, 90, 40], "hi": [130, 255, 255]},
+    ]
+    catalog = dict(LANDMARKS, range_m=[0.2, 3.0])
+    catalog["landmarks"] = [
+        {"name": "A", "color": "red", "width": 0.05},
+        {"name": "B", "bands": ["green", "blue"], "hsv": boxes, "height": 0.3},
+    ]
+    (tmp_path / "lm.json").write_text(json.dumps(catalog))
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    session, _ = read_back(tmp_path / "out.mcap")
+    assert session["range_m"] == [0.2, 3.0]
+    assert session["landmarks"] == catalog["landmarks"]

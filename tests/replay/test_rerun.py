@@ -235,3 +235,29 @@ def test_joint_residuals_noise_and_estimator_are_shown(
     texts = " ".join(str(t) for r in rows["/log"] for t in (r.get("TextLog:text") or []))
     assert "map made by the joint estimator" in texts
     assert "placed by reference pair" in texts
+
+
+def test_rejected_blobs_are_shown_with_the_reason(tmp_path: Path) -> None:
+    """L4 said to be 5 mm wide, seen from 0.3 m on: its 5-column bar (5 deg) cannot be it; every
+    frame shows the rejected blob as a labelled line at its column, and no detection of L4."""
+    from logfactory import session_doc
+
+    doc = session_doc()
+    doc["landmarks"][3]["width"] = 0.005
+    doc["range_m"] = [0.3, 3.0]
+    log = write_log(tmp_path / "narrow.mcap", doc=doc, between=2)
+    rrd = tmp_path / "narrow.rrd"
+    result = CliRunner().invoke(cli, ["replay", str(log), "--save", str(rrd), "--n-l", "100"])
+    assert result.exit_code == 0, result.output
+    data = _read(rrd)
+    rows = [r for r in data["/camera/panorama/rejected"] if "LineStrips2D:strips" in r]
+    assert len(rows) == 4 * len(MOVES)
+    for r in rows:
+        (label,) = r["LineStrips2D:labels"]
+        assert label == "rejected: 5.0 deg wide: wider than 0.005 m at 0.3 m (1.0 deg)"
+        ((u0, v0), (u1, v1)) = r["LineStrips2D:strips"][0]
+        assert u0 == u1 and (v0, v1) == (0.0, HEIGHT)
+    detected = [r for r in data["/camera/panorama/detections"] if "LineStrips2D:labels" in r]
+    assert detected and not any(
+        label.startswith("L4 ") for r in detected for label in r["LineStrips2D:labels"]
+    )
