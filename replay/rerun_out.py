@@ -7,13 +7,13 @@ import os
 import socket
 import sys
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import IO, Any, Literal
 from urllib.parse import quote, urlsplit
 
 import rerun as rr
 
 from data_schemas.errors import BslamError
-from data_schemas.outputs import OutputGuard, pipe_into
+from data_schemas.outputs import OutputGuard, create_new, pipe_into
 from replay.blueprint import method_blueprint
 from replay.follow import FollowedLog
 from replay.process import open_log, process_log
@@ -219,11 +219,14 @@ def save_rrd(
         )  # a bad log fails here, before any output exists
         # Rerun only logs a failed write: it writes into a pipe, and every write to the file
         # is ours (checked, then fsynced before the file is renamed into place)
-        stream = (
-            stack.enter_context(open(rrd, "wb"))
-            if followed
-            else stack.enter_context(guard.writing(rrd))
-        )
+        stream: IO[bytes]
+        if followed:  # written in place, so that what was read is kept however the log ends
+            if force and os.path.lexists(rrd):
+                os.unlink(rrd)  # the old recording (or the link itself, never its target)
+            stack.enter_context(create_new(rrd))  # a second writer of the name refuses
+            stream = stack.enter_context(open(rrd, "wb"))
+        else:
+            stream = stack.enter_context(guard.writing(rrd))
         pipe = stack.enter_context(pipe_into(stream, what=f"Rerun recording {os.fspath(rrd)}"))
         rec, _ = open_recording(recording_id(opened), RerunTarget("save", pipe), live=followed)
         try:
