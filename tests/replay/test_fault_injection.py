@@ -19,6 +19,7 @@ import stat
 import subprocess
 import sys
 import time
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -408,6 +409,35 @@ def test_every_command_counts_salvage_the_same(small_log: Path, tmp_path: Path) 
     ]
     expected = f"{total - 1} of {total} messages salvaged (1 more dropped"
     assert all(expected in text for text in said), said
+
+
+def test_skip_corrupt_skips_a_message_that_does_not_decode(small_log: Path, tmp_path: Path) -> None:
+    data = bytearray(small_log.read_bytes())
+    movement = data.index(b'"phase":"start"')  # a /robot/movement message's data
+    start = data.rindex(b'{"timestamp":{"sec"', 0, movement)
+    data[start : start + 1] = b"["  # the same length, no longer JSON
+    with small_log.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and len(summary.chunk_indexes) == 1
+    chunk = summary.chunk_indexes[0]
+    # the stored chunk's CRC made anew (zlib), so the damage is in the message alone
+    head = chunk.chunk_start_offset + 9 + 16  # opcode, length, start and end time
+    size = int.from_bytes(data[head : head + 8], "little")
+    records_at = chunk.chunk_start_offset + chunk.chunk_length - size
+    crc = zlib.crc32(data[records_at : records_at + size])
+    data[head + 8 : head + 12] = crc.to_bytes(4, "little")
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(bytes(data))
+    runner = CliRunner()
+    result = runner.invoke(cli, ["info", str(broken)])
+    assert result.exit_code == 0, result.output  # every chunk checks out
+    result = runner.invoke(cli, ["process", str(broken)])
+    assert result.exit_code == 1 and "not valid JSON" in result.stderr, result.output
+    assert result.stderr.count("\n") == 1
+    result = runner.invoke(cli, ["process", str(broken), "--skip-corrupt"])
+    assert result.exit_code == 0, result.output
+    skipped = [line for line in result.stderr.splitlines() if "does not decode" in line]
+    assert len(skipped) == 1 and skipped[0].startswith("warning: "), result.stderr
 
 
 # ------------------------------------------------------------------ signals at start-up
