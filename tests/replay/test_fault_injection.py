@@ -325,6 +325,22 @@ def test_a_dangling_link_is_an_existing_output(small_log: Path, tmp_path: Path) 
     assert not link.is_symlink() and json.loads(link.read_text())["movements"]
 
 
+@pytest.mark.slow
+def test_simulate_onto_a_dangling_link_never_creates_its_target(tmp_path: Path) -> None:
+    target = tmp_path / "elsewhere" / "t.mcap"
+    link = tmp_path / "run.mcap"
+    link.symlink_to(target)
+    args = ["simulate", "--scenario", "paper", "--out", str(link)]
+    code, lines, _ = run_bslam(*args, cwd=tmp_path, timeout=120)
+    assert code == 1
+    _one_error(lines, "exists (a symbolic link): pass --force")
+    code, lines, _ = run_bslam(*args, "--force", cwd=tmp_path, timeout=120)
+    assert code == 0, lines
+    assert not target.parent.exists()
+    assert (tmp_path / "run.old-1.mcap").is_symlink()  # the link moved aside, as an old log
+    assert not link.is_symlink() and link.stat().st_size > 0
+
+
 def test_stale_temporary_files_are_cleaned(small_log: Path, tmp_path: Path) -> None:
     stale = tmp_path / ".s.json.abcd1234.part.json"
     stale.write_text("left by a killed run")
