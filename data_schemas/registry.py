@@ -25,6 +25,17 @@ MESSAGE_ENCODING = "json"
 SESSION_METADATA_NAME = "bslam.session"
 
 
+#: Channel names the code refers to (every channel, with its schema, is in :data:`TOPICS`).
+CAMERA_TOPIC = "/camera/panorama"
+COMMAND_TOPIC = "/robot/command"
+ODOMETRY_TOPIC = "/robot/odometry"
+ODOMETRY_POSE_TOPIC = "/robot/odometry_pose"
+BEARINGS_TOPIC = "/sensor/bearings"
+MOVEMENT_TOPIC = "/robot/movement"
+SIM_TRUTH_TOPIC = "/sim/ground_truth"
+TRUTH_POSE_TOPIC = "/truth/robot_pose"
+
+
 @dataclass(frozen=True)
 class Topic:
     """A channel of a bearing-slam log."""
@@ -36,39 +47,39 @@ class Topic:
 
 _TOPIC_LIST = [
     Topic(
-        "/camera/panorama",
+        CAMERA_TOPIC,
         "foxglove.CompressedImage",
         "every captured frame, PNG (lossless); foxglove.RawImage 'bgr8' is accepted too",
     ),
     Topic(
-        "/robot/command",
+        COMMAND_TOPIC,
         "bslam.RobotCommand",
         "each serial exchange: request, reply, outcome, latency",
     ),
-    Topic("/robot/odometry", "bslam.Odometry", "wheel encoder counters"),
+    Topic(ODOMETRY_TOPIC, "bslam.Odometry", "wheel encoder counters"),
     Topic(
-        "/robot/odometry_pose",
+        ODOMETRY_POSE_TOPIC,
         "bslam.OdometryPose",
         "pose integrated from wheel odometry (m, rad, odometry frame), a driving robot's motion",
     ),
     Topic(
-        "/sensor/bearings",
+        BEARINGS_TOPIC,
         "bslam.BearingSet",
         "landmark bearings from any front end (beacon sensor, fiducials, another pipeline)",
     ),
     Topic(
-        "/robot/movement",
+        MOVEMENT_TOPIC,
         "bslam.Movement",
         "movement index, phase (start/end), keyframe at rest, commanded turn and distance",
     ),
     Topic("/log", "foxglove.Log", "recorder events and faults"),
     Topic(
-        "/sim/ground_truth",
+        SIM_TRUTH_TOPIC,
         "bslam.GroundTruth",
         "simulation only: true robot pose x, y, heading (m, rad, world frame)",
     ),
     Topic(
-        "/truth/robot_pose",
+        TRUTH_POSE_TOPIC,
         "bslam.GroundTruth",
         "imported logs, evaluation only: the robot's pose by an outside reference (motion "
         "capture; m, rad, the truth's world frame)",

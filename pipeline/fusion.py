@@ -235,7 +235,10 @@ def fuse(
 
 #: Default proposal draws per output particle of :func:`fuse_likelihood`.
 PROPOSALS_PER_PARTICLE = 16
-#: Particles per landmark in FL: the paper's n_l, the default of the filter and the estimators.
+#: Particles per landmark in FR (after one movement) and in FL (the belief): the paper's n_r and
+#: n_l, the defaults of the filter and the estimators (``replay.defaults`` spells them out for a
+#: command line without numpy; a test holds them equal).
+PAPER_N_R = 50
 PAPER_N_L = 300
 #: The defensive mixture draws at most this many points: its two KDE densities (n_l kernels
 #: each) at the draws then cost at most ``DEFENSIVE_DRAWS x n_l``, linear in n_l. The paper's

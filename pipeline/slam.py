@@ -35,7 +35,7 @@ from pipeline.cones import (
 )
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import FrameChange, change_frame
-from pipeline.fusion import PAPER_N_L, LikelihoodUpdate, fuse, fuse_likelihood
+from pipeline.fusion import PAPER_N_L, PAPER_N_R, LikelihoodUpdate, fuse, fuse_likelihood
 from pipeline.init_fr import initialize_fr, sample_fr_posterior
 from pipeline.likelihood import N_FRAMES, FrameLikelihood
 from pipeline.priors import R_MAX_FR, R_MIN_FR, ImpartialPrior, PriorName, make_prior
@@ -127,9 +127,9 @@ class BearingSlam:
     prior : {"impartial", "gaussian", "mixture"}
         Single-bearing prior used to weight the cone intersection.
     n_r : int
-        Particles per landmark in FR (paper: 50).
+        Particles per landmark in FR (default: the paper's).
     n_l : int
-        Particles per landmark in FL (paper: 300).
+        Particles per landmark in FL (default: the paper's).
     frame_change : {"sampled", "exact"}
         O(n_l) random triples (default: as accurate, far faster) or the paper's enumeration.
     rng : numpy.random.Generator
@@ -158,7 +158,7 @@ class BearingSlam:
         *,
         vision_error_rad: float,
         prior: PriorName = "impartial",
-        n_r: int = 50,
+        n_r: int = PAPER_N_R,
         n_l: int = PAPER_N_L,
         frame_change: FrameChange = "sampled",
         rng: np.random.Generator,

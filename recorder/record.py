@@ -33,7 +33,14 @@ from typing import Any
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import BslamError, LogError
 from data_schemas.mcap.writer import LogWriter
-from data_schemas.registry import IMAGE_SCHEMA, ImageEncoding
+from data_schemas.registry import (
+    CAMERA_TOPIC,
+    COMMAND_TOPIC,
+    IMAGE_SCHEMA,
+    MOVEMENT_TOPIC,
+    ODOMETRY_TOPIC,
+    ImageEncoding,
+)
 from data_schemas.stamps import stamp_from_ns
 from recorder.camera import Camera
 from recorder.clock import Clock
@@ -164,7 +171,7 @@ class CommandSink:
         self._writer = writer
         pending, self._pending = self._pending, []
         for msg in pending:
-            writer.write("/robot/command", msg)
+            writer.write(COMMAND_TOPIC, msg)
 
     def __call__(self, msg: dict[str, Any]) -> None:
         if self._writer is None:
@@ -172,7 +179,7 @@ class CommandSink:
             return
         if self._writer.failed:
             return  # the log already raised its error; stopping the motors must still work
-        self._writer.write("/robot/command", msg)
+        self._writer.write(COMMAND_TOPIC, msg)
 
 
 @dataclass(frozen=True)
@@ -229,7 +236,7 @@ class _Recorder:
         image = self.rig.camera.read()
         encoding = self.settings.encoding
         msg = frame_message(image, t_ns, encoding=encoding, png_level=self.settings.png_level)
-        self.writer.write("/camera/panorama", msg, schema=IMAGE_SCHEMA[encoding])
+        self.writer.write(CAMERA_TOPIC, msg, schema=IMAGE_SCHEMA[encoding])
         if self.rig.ground_truth is not None:
             x, y, heading = self.rig.ground_truth()
             self.writer.write(
@@ -261,7 +268,7 @@ class _Recorder:
         left, right = robot.read_position_counters()
         now = stamp_from_ns(self.rig.clock.monotonic_ns())
         self.writer.write(
-            "/robot/odometry",
+            ODOMETRY_TOPIC,
             {
                 "timestamp": now,
                 "left_pulses": left,
@@ -270,7 +277,7 @@ class _Recorder:
             },
         )
         self.writer.write(
-            "/robot/movement",
+            MOVEMENT_TOPIC,
             {
                 "timestamp": now,
                 "index": index,

@@ -17,7 +17,8 @@ ESTIMATOR = ESTIMATORS[0]
 #: default first: the paper's impartial PDF.
 PRIORS = ("impartial", "gaussian", "mixture")
 PRIOR = PRIORS[0]
-#: Particles per landmark in FR (after one movement) and in FL (the belief): the paper's.
+#: Particles per landmark in FR (after one movement) and in FL (the belief): the paper's
+#: (``pipeline.fusion.PAPER_N_R`` and ``PAPER_N_L``; a test holds them equal).
 N_R = 50
 N_L = 300
 #: Seed of a run's random generator.

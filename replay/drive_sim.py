@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from data_schemas.mcap.writer import software_version
+from data_schemas.registry import SIM_TRUTH_TOPIC
 from data_schemas.session import SCHEMA_VERSION, session_from_doc
 from data_schemas.stamps import stamp_from_ns
 from pipeline.driving.simulate import DrivingRun, DrivingSpec, arenas, simulate_drive
@@ -32,7 +33,6 @@ from replay.importers.source import (
     odometry_pose,
 )
 from replay.importers.write import ImportResult, import_log
-from replay.plan import TRUTH_TOPIC
 
 
 def drive_session(run: DrivingRun, vision_error_deg: float) -> dict[str, Any]:
@@ -78,7 +78,7 @@ def drive_messages(run: DrivingRun, bearing_std_rad: float | None = None) -> lis
     truth = [
         Message(
             int(t),
-            TRUTH_TOPIC,
+            SIM_TRUTH_TOPIC,
             {"timestamp": stamp_from_ns(int(t)), "x": p[0], "y": p[1], "heading": p[2]},
         )
         for t, p in zip(run.t_ns, run.truth_world.tolist(), strict=True)

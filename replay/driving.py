@@ -24,17 +24,23 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.errors import EstimationError
+from data_schemas.registry import (
+    BEARINGS_TOPIC,
+    CAMERA_TOPIC,
+    ODOMETRY_POSE_TOPIC,
+    SIM_TRUTH_TOPIC,
+    TRUTH_POSE_TOPIC,
+)
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import Detection
 from pipeline.driving.estimator import DrivingOptions, DrivingSlam, KeyframeResult
 from pipeline.driving.odometry import compose
-from replay.importers.source import BEARINGS_TOPIC, ODOMETRY_POSE_TOPIC, TRUTH_POSE_TOPIC
-from replay.plan import TRUTH_TOPIC, MovementPlan
+from replay.plan import MovementPlan
 from replay.records import FrameRecord, MethodConfig, MovementRecord, RunInfo, Sink
-from replay.stages import CAMERA_TOPIC, MessageLog, estimate_records
+from replay.stages import MessageLog, estimate_records
 
 #: the robot's true pose: the simulator's, or an imported log's outside reference
-TRUTH_POSE_TOPICS = (TRUTH_TOPIC, TRUTH_POSE_TOPIC)
+TRUTH_POSE_TOPICS = (SIM_TRUTH_TOPIC, TRUTH_POSE_TOPIC)
 DRIVING_TOPICS = (BEARINGS_TOPIC, ODOMETRY_POSE_TOPIC, *TRUTH_POSE_TOPICS)
 #: Length (FL) of a ray drawn towards a landmark not in the map yet.
 RAY_FL = 1.5
@@ -136,7 +142,7 @@ class DrivingRunner:
                         {b["landmark"]: float(b["std_rad"]) for b in given if "std_rad" in b},
                     )
                 else:
-                    self.truth.add(TRUTH_TOPIC, doc)
+                    self.truth.add(SIM_TRUTH_TOPIC, doc)
             self._emit(self.slam.finish())
             if self.slam.n_keyframes == 0:
                 raise EstimationError(

@@ -17,12 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.mcap.processable import ProcessableLog
+from data_schemas.registry import MOVEMENT_TOPIC, ODOMETRY_TOPIC, SIM_TRUTH_TOPIC
 from data_schemas.stamps import ns_from_stamp
 
-MOVEMENT_TOPIC = "/robot/movement"
-ODOMETRY_TOPIC = "/robot/odometry"
-TRUTH_TOPIC = "/sim/ground_truth"
-PLAN_TOPICS = (MOVEMENT_TOPIC, ODOMETRY_TOPIC, TRUTH_TOPIC)
+PLAN_TOPICS = (MOVEMENT_TOPIC, ODOMETRY_TOPIC, SIM_TRUTH_TOPIC)
 PHASES = ("start", "end")
 
 
@@ -79,7 +77,7 @@ class MovementPlan:
                 pulses = 0.5 * (float(doc["left_pulses"]) + float(doc["right_pulses"]))
                 self._travel_m[ns_from_stamp(doc["timestamp"])] = abs(pulses) * float(mm) / 1e3
             return None
-        if topic == TRUTH_TOPIC:
+        if topic == SIM_TRUTH_TOPIC:
             t_ns = ns_from_stamp(doc["timestamp"])
             i = bisect.bisect_right(self.truth_times_ns, t_ns)
             self.truth_times_ns.insert(i, t_ns)

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from data_schemas.errors import EstimationError, ImageError, MissingMetadataError, SchemaError
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
-from data_schemas.registry import IMAGE_SCHEMA, image_encoding
+from data_schemas.registry import BEARINGS_TOPIC, CAMERA_TOPIC, IMAGE_SCHEMA, image_encoding
 from data_schemas.session import Session, shared_classes, shared_reference_problem
 from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import BearingExtractor, Detection, decode_frame
@@ -53,7 +53,6 @@ from replay.records import (
 )
 from replay.truth import Truth, truth_from_scenario, truth_of_session
 
-CAMERA_TOPIC = "/camera/panorama"
 #: what the runner reads, in log order: frames, the movement plan, the simulator's truth
 STREAM_TOPICS = (CAMERA_TOPIC, *PLAN_TOPICS)
 #: handled frames kept in case a movement message names one after a later frame
@@ -89,12 +88,12 @@ def decode_image(schema: str, msg: dict[str, Any]) -> tuple[NDArray[np.uint8], b
     home = next((s for e, s in IMAGE_SCHEMA.items() if e == stated.lower()), schema)
     if home != schema:
         raise ImageError(
-            f"/camera/panorama: a {schema} frame cannot hold {stated!r} frames (a {home} can)"
+            f"{CAMERA_TOPIC}: a {schema} frame cannot hold {stated!r} frames (a {home} can)"
         )
     try:
         data = pybase64.b64decode(msg["data"], validate=True)  # SIMD; 3x the stdlib's speed
     except (KeyError, ValueError) as exc:
-        raise ImageError(f"/camera/panorama: frame data is not base64 ({exc})") from None
+        raise ImageError(f"{CAMERA_TOPIC}: frame data is not base64 ({exc})") from None
     if encoding == "png":
         return decode_frame(data, stated), data
     image = decode_frame(
@@ -474,7 +473,6 @@ def _run_one(log: MessageLog, method: MethodConfig, sinks: Sequence[Sink]) -> No
     """Frames through :class:`Runner`; a log without a camera (bearings and odometry) through
     :class:`replay.driving.DrivingRunner`."""
     from replay.driving import DrivingRunner, check_topics
-    from replay.importers.source import BEARINGS_TOPIC
 
     topics = getattr(log, "topics", None)  # None: a followed log, its channels still to come
     driving = log.session.calibration is None if topics is None else BEARINGS_TOPIC in topics

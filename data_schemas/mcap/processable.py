@@ -43,7 +43,13 @@ from data_schemas.inputs import open_input
 from data_schemas.mcap.index import CorruptChunksError, DamagedLogError, LogIndex, MessageFields
 from data_schemas.mcap.read import LogMessage, corrupt_log_line, corruption
 from data_schemas.mcap.scan import Damage, LogScan
-from data_schemas.registry import IMAGE_SCHEMAS, SESSION_METADATA_NAME, TOPICS, schema_dict
+from data_schemas.registry import (
+    CAMERA_TOPIC,
+    IMAGE_SCHEMAS,
+    SESSION_METADATA_NAME,
+    TOPICS,
+    schema_dict,
+)
 from data_schemas.session import Session, session_from_metadata
 
 
@@ -94,7 +100,7 @@ def check_channel(name: str, topic_name: str, schema_name: str) -> str | None:
             f"{name}: channel {topic_name} has schema {schema_name!r}, which this "
             "version of bearing-slam does not know; upgrade bearing-slam"
         ) from None
-    allowed = IMAGE_SCHEMAS if topic_name == "/camera/panorama" else (known and known.schema,)
+    allowed = IMAGE_SCHEMAS if topic_name == CAMERA_TOPIC else (known and known.schema,)
     if known is not None and schema_name not in allowed:
         raise UnknownSchemaError(
             f"{name}: channel {topic_name} has schema {schema_name!r}, expected "

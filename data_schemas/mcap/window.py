@@ -18,11 +18,10 @@ from pathlib import Path
 from data_schemas.errors import BslamError
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
+from data_schemas.registry import CAMERA_TOPIC, MOVEMENT_TOPIC
 from data_schemas.session import Session
 from data_schemas.stamps import ns_from_stamp
 
-MOVEMENT_TOPIC = "/robot/movement"
-CAMERA_TOPIC = "/camera/panorama"
 _BOUND = re.compile(r"^(?:(?P<s>\d+(?:\.\d*)?|\.\d+)s|m(?P<m>\d+))$")
 
 

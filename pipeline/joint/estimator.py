@@ -29,7 +29,7 @@ from data_schemas.errors import EstimationError
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import to_fl
-from pipeline.fusion import PAPER_N_L
+from pipeline.fusion import PAPER_N_L, PAPER_N_R
 from pipeline.joint import graph as g
 from pipeline.joint.geometry import (
     KeyframePose,
@@ -156,7 +156,7 @@ class JointSlam:
         vision_error_rad: float,
         rng: np.random.Generator,
         prior: PriorName = "impartial",
-        n_r: int = 50,
+        n_r: int = PAPER_N_R,
         n_l: int = PAPER_N_L,
         robust: bool = True,
         turn_prior_sigma_rad: float | None = None,

@@ -6,8 +6,7 @@ from pathlib import Path
 
 import click
 
-from replay.cli.options import SEED
-from replay.cli.process import estimator_option
+from replay.cli.options import SEED, estimator_option
 
 
 @click.command("demo")

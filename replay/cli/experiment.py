@@ -12,8 +12,7 @@ import click
 
 from data_schemas.errors import BslamError
 from replay import defaults
-from replay.cli.options import SEED
-from replay.cli.process import MAX_N_L, MAX_N_R, distance_prior_option
+from replay.cli.options import MAX_N_L, MAX_N_R, SEED, distance_prior_option
 from replay.experiments.protocol import (
     ALL_SWEEP_PARAMS,
     FRAME_CHANGES,

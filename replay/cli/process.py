@@ -11,131 +11,13 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from replay import defaults
 from replay.cli.follow import end_of_follow, follow_options
-from replay.cli.options import SEED, FiniteFloat, window_options
+from replay.cli.options import method_options, window_options
 
 if TYPE_CHECKING:
     from data_schemas.mcap.window import Bound
     from replay.batch import LogJob
     from replay.records import MethodConfig
-
-#: Largest particle counts: FR keeps n_r^2 observation points per movement (2000: 64 MB).
-MAX_N_R = 2_000
-MAX_N_L = 100_000
-
-estimator_option = click.option(
-    "--estimator",
-    type=click.Choice(defaults.ESTIMATORS),
-    default=defaults.ESTIMATOR,
-    show_default=True,
-    help="joint: every bearing in one factor graph (GTSAM), initialized by the paper's filter; "
-    "paper: the paper's filter alone.",
-)
-
-
-def _zero_is_off(ctx: click.Context, param: click.Parameter, value: float) -> float | None:
-    return value or None
-
-
-distance_prior_option = click.option(
-    "--distance-prior",
-    "distance_prior",
-    type=FiniteFloat(min=0.0),
-    callback=_zero_is_off,
-    default=defaults.DISTANCE_PRIOR_REL or 0.0,
-    show_default=True,
-    metavar="FRACTION",
-    help="Joint estimator: trust each movement's driven distance (odometry, else the "
-    "commanded distance) to this relative std; 0 leaves the lengths free.",
-)
-
-
-#: Options of the driving estimator (logs with bearings and odometry); None: its defaults.
-driving_method_options = [
-    click.option(
-        "--keyframe-distance",
-        "keyframe_distance_m",
-        type=FiniteFloat(min=0.0, min_open=True),
-        default=None,
-        metavar="M",
-        help="Driving logs: a keyframe every M metres of odometry path [default: 0.3].",
-    ),
-    click.option(
-        "--keyframe-turn",
-        "keyframe_turn_deg",
-        type=FiniteFloat(min=0.0, min_open=True),
-        default=None,
-        metavar="DEG",
-        help="Driving logs: or every DEG degrees of turning [default: 20].",
-    ),
-    click.option(
-        "--odometry-std",
-        "odometry_std_per_m",
-        type=FiniteFloat(min=0.0, min_open=True),
-        default=None,
-        metavar="M_PER_M",
-        help="Driving logs: odometry position std per metre of path [default: 0.05].",
-    ),
-    click.option(
-        "--odometry-heading-std",
-        "odometry_heading_std_per_rad",
-        type=FiniteFloat(min=0.0, min_open=True),
-        default=None,
-        metavar="RAD_PER_RAD",
-        help="Driving logs: odometry heading std per radian turned [default: 0.05].",
-    ),
-]
-
-
-def method_options(fn: click.decorators.FC) -> click.decorators.FC:
-    """The estimator options shared by process, replay and demo."""
-    for option in reversed(
-        [
-            estimator_option,
-            click.option(
-                "--turn-prior",
-                "turn_prior_deg",
-                type=click.FloatRange(0.0, min_open=True),
-                default=defaults.TURN_PRIOR_DEG,
-                metavar="DEG",
-                help="Joint estimator: trust each commanded turn in place to this std "
-                "(degrees) [default: turns free].",
-            ),
-            distance_prior_option,
-            click.option(
-                "--prior",
-                type=click.Choice(defaults.PRIORS),
-                default=defaults.PRIOR,
-                show_default=True,
-                help="Density of one bearing: the paper's impartial PDF or a baseline.",
-            ),
-            click.option(
-                "--n-r",
-                type=click.IntRange(2, MAX_N_R),
-                default=defaults.N_R,
-                show_default=True,
-                help="Particles per landmark in FR.",
-            ),
-            click.option(
-                "--n-l",
-                type=click.IntRange(2, MAX_N_L),
-                default=defaults.N_L,
-                show_default=True,
-                help="Particles per landmark in FL.",
-            ),
-            click.option(
-                "--seed",
-                type=SEED,
-                default=defaults.SEED,
-                show_default=True,
-                help="Seed of the estimator's random generator.",
-            ),
-            *driving_method_options,
-        ]
-    ):
-        fn = option(fn)
-    return fn
 
 
 class _WarningEcho(logging.Handler):
@@ -205,17 +87,7 @@ def process(
     logs: tuple[str, ...],
     out: Path | None,
     summary: Path | None,
-    estimator: str,
-    turn_prior_deg: float | None,
-    distance_prior: float | None,
-    prior: str,
-    n_r: int,
-    n_l: int,
-    seed: int,
-    keyframe_distance_m: float | None,
-    keyframe_turn_deg: float | None,
-    odometry_std_per_m: float | None,
-    odometry_heading_std_per_rad: float | None,
+    method: MethodConfig,
     workers: int,
     scheduler: str | None,
     force: bool,
@@ -244,22 +116,8 @@ def process(
     from data_schemas.mcap.window import LogWindow
     from replay.batch import expand_logs, plan_jobs
     from replay.process import dumps, process_log, result_line
-    from replay.records import MethodConfig
     from replay.sinks.progress import ProgressSink
 
-    method = MethodConfig(
-        prior=prior,
-        n_r=n_r,
-        n_l=n_l,
-        seed=seed,
-        estimator=estimator,
-        turn_prior_deg=turn_prior_deg,
-        distance_prior=distance_prior,
-        keyframe_distance_m=keyframe_distance_m,
-        keyframe_turn_deg=keyframe_turn_deg,
-        odometry_std_per_m=odometry_std_per_m,
-        odometry_heading_std_per_rad=odometry_heading_std_per_rad,
-    )
     window = LogWindow(start, end)
     if follow and window:
         raise click.UsageError("--from/--to take a finished log, not --follow")

@@ -9,11 +9,12 @@ from typing import TYPE_CHECKING
 import click
 
 from replay.cli.follow import end_of_follow, follow_options
-from replay.cli.options import window_options
-from replay.cli.process import method_options, show_skips
+from replay.cli.options import method_options, window_options
+from replay.cli.process import show_skips
 
 if TYPE_CHECKING:
     from data_schemas.mcap.window import Bound
+    from replay.records import MethodConfig
 
 
 @click.command("replay")
@@ -71,17 +72,7 @@ def replay(
     skip_corrupt: bool,
     start: Bound | None,
     end: Bound | None,
-    estimator: str,
-    turn_prior_deg: float | None,
-    distance_prior: float | None,
-    prior: str,
-    n_r: int,
-    n_l: int,
-    seed: int,
-    keyframe_distance_m: float | None,
-    keyframe_turn_deg: float | None,
-    odometry_std_per_m: float | None,
-    odometry_heading_std_per_rad: float | None,
+    method: MethodConfig,
     follow: bool,
     idle_timeout: float,
 ) -> None:
@@ -102,7 +93,6 @@ def replay(
     from replay.cli.recording import viewing_hints
     from replay.follow import FollowedLog
     from replay.process import open_log, result_line, windowed
-    from replay.records import MethodConfig
     from replay.rerun_out import (
         DEFAULT_GRPC_PORT,
         DEFAULT_WEB_PORT,
@@ -134,19 +124,6 @@ def replay(
         host or socket.gethostname(),
         DEFAULT_GRPC_PORT if port is None else port,
         DEFAULT_WEB_PORT if web_port is None else web_port,
-    )
-    method = MethodConfig(
-        prior=prior,
-        n_r=n_r,
-        n_l=n_l,
-        seed=seed,
-        estimator=estimator,
-        turn_prior_deg=turn_prior_deg,
-        distance_prior=distance_prior,
-        keyframe_distance_m=keyframe_distance_m,
-        keyframe_turn_deg=keyframe_turn_deg,
-        odometry_std_per_m=odometry_std_per_m,
-        odometry_heading_std_per_rad=odometry_heading_std_per_rad,
     )
     with show_skips():
         # a bad log fails here, before any output exists

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from data_schemas.calibration import Calibration
+from data_schemas.registry import CAMERA_TOPIC
 from recorder.frames import frame_message
 from recorder.session import landmark_entry, load_calibration_file, load_landmark_file
 from replay.importers.csv_files import read_odometry
@@ -106,7 +107,7 @@ class ImageFolderImporter:
             range_m=catalog.range_m,
             camera=camera,
         )
-        placeholders = [Message(t, "/camera/panorama", {"path": str(p)}) for t, p in frames]
+        placeholders = [Message(t, CAMERA_TOPIC, {"path": str(p)}) for t, p in frames]
         ordered = in_time_order(placeholders, odometry)
         notes = [] if self.odometry is not None else ["no odometry: frames only"]
         return ImportedLog(doc, _encoded(ordered, calibration), len(ordered), notes)
@@ -117,7 +118,7 @@ def _encoded(ordered: list[Message], calibration: Calibration) -> Iterator[Messa
     import cv2
 
     for msg in ordered:
-        if msg.topic != "/camera/panorama":
+        if msg.topic != CAMERA_TOPIC:
             yield msg
             continue
         path = msg.doc["path"]

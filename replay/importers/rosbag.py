@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.calibration import Calibration, pinhole_from_camera_info
+from data_schemas.registry import CAMERA_TOPIC
 from data_schemas.stamps import NS_PER_S
 from recorder.frames import frame_message
 from recorder.session import landmark_entry, load_calibration_file, load_landmark_file
@@ -213,7 +214,7 @@ def _messages(reader: Any, image: Any, odom: Any, calibration: Calibration) -> I
                     f"calibration is {calibration.width} x {calibration.height}"
                 )
             frame = frame_message(bgr, t_ns, encoding="png", png_level=PNG_LEVEL)
-            yield Message(bag_ns, "/camera/panorama", frame)
+            yield Message(bag_ns, CAMERA_TOPIC, frame)
     finally:
         reader.close()
 

@@ -19,12 +19,9 @@ from typing import Any, Protocol
 
 from data_schemas.errors import BslamError
 from data_schemas.mcap.writer import software_version
+from data_schemas.registry import BEARINGS_TOPIC, ODOMETRY_POSE_TOPIC, TRUTH_POSE_TOPIC
 from data_schemas.session import SCHEMA_VERSION, session_from_doc
 from data_schemas.stamps import stamp_from_ns
-
-BEARINGS_TOPIC = "/sensor/bearings"
-ODOMETRY_POSE_TOPIC = "/robot/odometry_pose"
-TRUTH_POSE_TOPIC = "/truth/robot_pose"
 
 
 class ImportSourceError(BslamError):

@@ -15,7 +15,8 @@ from tqdm import tqdm
 
 from data_schemas.errors import BslamError
 from data_schemas.mcap.processable import ProcessableLog
-from data_schemas.mcap.window import MOVEMENT_TOPIC, LogWindow, WindowedLog
+from data_schemas.mcap.window import LogWindow, WindowedLog
+from data_schemas.registry import MOVEMENT_TOPIC
 from replay.records import AssociationRecord, FrameRecord, MovementRecord, RunInfo
 
 

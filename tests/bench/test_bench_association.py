@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.estimators import make_estimator
+from pipeline.fusion import PAPER_N_L, PAPER_N_R
 from pipeline.synthetic import simulate_bearings
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "replay"))
@@ -51,8 +52,8 @@ def _yardstick(n: int, seed: int) -> float:
         vision_error_rad=EPS,
         rng=rng,
         prior="impartial",
-        n_r=50,
-        n_l=300,
+        n_r=PAPER_N_R,
+        n_l=PAPER_N_L,
         turn_prior_sigma_rad=None,
         distance_prior_rel=None,
     )

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.association.final import FinalDetection
 from pipeline.estimators import make_estimator
+from pipeline.fusion import PAPER_N_L, PAPER_N_R
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import simulate_bearings
 from recorder.sim.world import Arena, Landmark, SimWorld
@@ -123,8 +124,8 @@ def run_synthetic(
         vision_error_rad=EPS,
         rng=rng,
         prior="impartial",
-        n_r=50,
-        n_l=300,
+        n_r=PAPER_N_R,
+        n_l=PAPER_N_L,
         turn_prior_sigma_rad=None,
         distance_prior_rel=None,
     )

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from pipeline.fusion import PAPER_N_L, PAPER_N_R
 from pipeline.synthetic import PAPER_REFERENCE, simulate_bearings
 from replay.experiments.methods import (
     RunContext,
@@ -52,8 +53,8 @@ def test_methods_fall_with_movements_and_respect_the_bound() -> None:
                 sim.observations,
                 ctx,
                 prior=prior,
-                n_r=50,
-                n_l=300,
+                n_r=PAPER_N_R,
+                n_l=PAPER_N_L,
                 frame_change="sampled",
                 rng=np.random.default_rng(run),
             )

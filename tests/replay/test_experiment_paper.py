@@ -246,12 +246,14 @@ def test_names_agree_with_the_estimator() -> None:
     from typing import get_args
 
     from pipeline.estimators import ESTIMATORS
+    from pipeline.fusion import PAPER_N_L, PAPER_N_R
     from pipeline.priors import PriorName
     from replay import defaults
     from replay.records import PRIORS as RECORD_PRIORS
 
     assert defaults.PRIORS == RECORD_PRIORS == get_args(PriorName)
     assert defaults.ESTIMATORS == ESTIMATORS
+    assert (defaults.N_R, defaults.N_L) == (PAPER_N_R, PAPER_N_L) == (50, 300)  # the paper's
 
 
 def test_distance_prior_default_is_shared() -> None:

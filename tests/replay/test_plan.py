@@ -7,8 +7,9 @@ from pathlib import Path
 import pytest
 
 from data_schemas.mcap.processable import ProcessableLog
+from data_schemas.registry import MOVEMENT_TOPIC, ODOMETRY_TOPIC
 from data_schemas.stamps import stamp_from_ns
-from replay.plan import MOVEMENT_TOPIC, ODOMETRY_TOPIC, MovementPlan, read_plan
+from replay.plan import MovementPlan, read_plan
 
 REGRESS = Path(__file__).resolve().parents[1] / "data" / "regress"
 
