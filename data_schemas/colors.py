@@ -37,10 +37,15 @@ def appearance_problem(entry: Mapping[str, Any], *, name_only: bool = False) -> 
     """Why a catalog/scenario landmark entry's ``color``/``bands`` keys are unusable, or None.
 
     A landmark has either ``"color"`` (one colour name) or ``"bands"`` (two or more colour
-    names, top to bottom); the colour names themselves are checked by the schema. With
+    names, top to bottom) or ``"tag"`` (a fiducial marker's id); the colour names themselves are
+    checked by the schema. With
     ``name_only`` (a session without a camera) it may have neither: it is known by its name.
     """
     has_color, has_bands = "color" in entry, "bands" in entry
+    if "tag" in entry:
+        if has_color or has_bands:
+            return "a fiducial ('tag') has no 'color' or 'bands'; give one of the three"
+        return None
     if has_color and has_bands:
         return "give either 'color' (one colour) or 'bands' (colours top to bottom), not both"
     if not has_color and not has_bands and not name_only:

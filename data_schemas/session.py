@@ -29,9 +29,9 @@ class LandmarkSpec:
     Either ``color`` (a single-colour landmark, optional HSV override ``hsv_lo``/``hsv_hi``) or
     ``bands`` (a coded landmark: two or more colour names, top to bottom, equal heights; then
     ``color`` is None; optional HSV override per band, ``band_hsv``: ``(lo, hi)`` per band), or
-    neither in a session without a camera (known by its name only: a beacon id, a fiducial,
-    an imported dataset's landmark number). ``width_m`` and ``height_m``: its physical size
-    (m), if known.
+    ``tag`` (a fiducial marker's id in the session's ``tag_dictionary``), or neither in a
+    session without a camera (known by its name only: a beacon id, an imported dataset's
+    landmark number). ``width_m`` and ``height_m``: its physical size (m), if known.
     """
 
     name: str
@@ -42,11 +42,15 @@ class LandmarkSpec:
     band_hsv: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = ()
     width_m: float | None = None
     height_m: float | None = None
+    tag: int | None = None
 
     @property
     def label(self) -> str:
-        """The landmark's class: ``"red"`` or ``"magenta-yellow"`` (see ``class_label``); a
-        landmark known by its name only (no colour, no bands) is a class of its own, its name."""
+        """The landmark's class: ``"red"`` or ``"magenta-yellow"`` (see ``class_label``), or
+        ``"tag-17"`` for a fiducial marker; a landmark known by its name only (no colour, no
+        bands, no tag) is a class of its own, its name."""
+        if self.tag is not None:
+            return f"tag-{self.tag}"
         if self.color is None and not self.bands:
             return self.name
         return class_label(self.color, self.bands)
@@ -97,6 +101,8 @@ class Session:
     simulated : bool
     range_m : (float, float) or None
         Nearest and farthest distance (m) a landmark can be seen from, if given.
+    tag_dictionary : str
+        The fiducial markers' dictionary (``4x4_50`` unless the document says).
     doc : dict
         The whole JSON document (robot settings, camera source, scenario, provenance, versions).
     """
@@ -108,6 +114,7 @@ class Session:
     simulated: bool
     doc: dict[str, Any] = field(repr=False, compare=False)
     range_m: tuple[float, float] | None = None
+    tag_dictionary: str = "4x4_50"
 
     @property
     def scenario(self) -> dict[str, Any] | None:
@@ -179,6 +186,7 @@ def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> 
                 tuple((tuple(b["lo"]), tuple(b["hi"])) for b in per_band),
                 float(lm["width"]) if "width" in lm else None,
                 float(lm["height"]) if "height" in lm else None,
+                int(lm["tag"]) if "tag" in lm else None,
             )
         )
     range_m = doc.get("range_m")
@@ -195,6 +203,7 @@ def session_from_doc(doc: dict[str, Any], *, what: str = "session metadata") -> 
         simulated=bool(doc["simulated"]),
         doc=doc,
         range_m=None if range_m is None else (float(range_m[0]), float(range_m[1])),
+        tag_dictionary=str(doc.get("tag_dictionary", "4x4_50")),
     )
 
 

@@ -26,10 +26,12 @@ from data_schemas.session import (
 
 def landmark_entry(spec: LandmarkSpec) -> dict[str, Any]:
     """JSON form of one catalog entry (``hsv`` only when the colour class is overridden, one box
-    or one per band; ``width``/``height`` when known)."""
+    or one per band; ``tag`` for a fiducial; ``width``/``height`` when known)."""
     entry: dict[str, Any] = {"name": spec.name}
     if spec.bands:
         entry["bands"] = list(spec.bands)
+    elif spec.tag is not None:
+        entry["tag"] = spec.tag
     else:
         entry["color"] = spec.color
     if spec.hsv_lo is not None and spec.hsv_hi is not None:
@@ -192,10 +194,14 @@ class LandmarkCatalog:
     reference: tuple[str, str]
     vision_error_rad: float
     range_m: tuple[float, float] | None = None
+    tag_dictionary: str | None = None
 
     def session_keys(self) -> dict[str, Any]:
         """Top-level session keys besides landmarks, reference and the error bound."""
-        return {} if self.range_m is None else {"range_m": list(self.range_m)}
+        out: dict[str, Any] = {} if self.range_m is None else {"range_m": list(self.range_m)}
+        if self.tag_dictionary is not None:
+            out["tag_dictionary"] = self.tag_dictionary
+        return out
 
 
 def load_landmark_file(path: str | os.PathLike[str]) -> LandmarkCatalog:
@@ -208,7 +214,8 @@ def load_landmark_file(path: str | os.PathLike[str]) -> LandmarkCatalog:
     what = f"landmark file {os.fspath(path)}"
     if not isinstance(doc, dict):
         raise SchemaError(f"{what}: expected a JSON object with 'landmarks' and 'reference'")
-    unknown = sorted(set(doc) - {"landmarks", "reference", "vision_error_deg", "range_m"})
+    keys = {"landmarks", "reference", "vision_error_deg", "range_m", "tag_dictionary"}
+    unknown = sorted(set(doc) - keys)
     if unknown:
         raise SchemaError(f"{what}: unknown key {unknown[0]!r}")
     probe = {
@@ -225,5 +232,9 @@ def load_landmark_file(path: str | os.PathLike[str]) -> LandmarkCatalog:
     if shared:
         raise SchemaError(f"{what}: field 'reference': {shared}")
     return LandmarkCatalog(
-        session.landmarks, session.reference, session.vision_error_rad, session.range_m
+        session.landmarks,
+        session.reference,
+        session.vision_error_rad,
+        session.range_m,
+        doc.get("tag_dictionary"),
     )

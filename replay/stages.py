@@ -36,7 +36,13 @@ from data_schemas.mcap.read import LogMessage
 from data_schemas.registry import BEARINGS_TOPIC, CAMERA_TOPIC, IMAGE_SCHEMA, image_encoding
 from data_schemas.session import Session, shared_classes, shared_reference_problem
 from data_schemas.stamps import ns_from_stamp
-from pipeline.bearings import BearingExtractor, Detection, decode_frame
+from pipeline.bearings import (
+    BearingExtractor,
+    Detection,
+    TagExtractor,
+    decode_frame,
+    make_extractor,
+)
 from pipeline.estimate import LandmarkEstimate
 from pipeline.slam import MovementObservation, MovementResult
 from replay.alike import AlikeLandmarks
@@ -177,7 +183,12 @@ class Runner:
         self._extractor = (
             None
             if cal is None
-            else BearingExtractor(cal, self.session.landmarks, range_m=self.session.range_m)
+            else make_extractor(
+                cal,
+                self.session.landmarks,
+                range_m=self.session.range_m,
+                tag_dictionary=self.session.tag_dictionary,
+            )
         )
         alike = shared_classes(self.session.landmarks)
         if alike and method.estimator == "paper":
@@ -196,7 +207,7 @@ class Runner:
         self.state = _State()
 
     @property
-    def extractor(self) -> BearingExtractor:
+    def extractor(self) -> BearingExtractor | TagExtractor:
         """Bearings from frames; a session without a camera has frames to refuse."""
         if self._extractor is None:
             raise MissingMetadataError(

@@ -17,6 +17,7 @@ from pipeline.bearings.color_classes import (
 from pipeline.bearings.decode import decode_frame
 from pipeline.bearings.detection import ClassSightings, Detection
 from pipeline.bearings.extractor import BearingExtractor, check_image
+from pipeline.bearings.fiducials import TagExtractor, make_extractor
 from pipeline.bearings.pinhole import camera_view_rad, pixel_bearings
 
 __all__ = [
@@ -28,10 +29,12 @@ __all__ = [
     "HsvBox",
     "LandmarkCatalogError",
     "LandmarkClass",
+    "TagExtractor",
     "camera_view_rad",
     "check_image",
     "decode_frame",
     "hsv_box_for",
     "landmark_classes",
+    "make_extractor",
     "pixel_bearings",
 ]
