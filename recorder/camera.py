@@ -81,8 +81,13 @@ def quiet_opencv() -> None:
     A camera that fails is reported once, as our one-line error. A user who set
     ``OPENCV_LOG_LEVEL`` keeps that level.
     """
-    if "OPENCV_LOG_LEVEL" not in os.environ:
+    if "OPENCV_LOG_LEVEL" in os.environ:
+        return
+    if hasattr(cv2.utils, "logging"):  # OpenCV 5
         cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    else:  # OpenCV 4: cv2.setLogLevel, 0 = silent
+        opencv4: Any = cv2
+        opencv4.setLogLevel(0)
 
 
 class OpenCVCamera:

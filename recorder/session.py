@@ -154,10 +154,7 @@ def _read_file_storage(path: str) -> dict[str, Any]:
 
     if not os.path.isfile(path):
         raise CalibrationError(f"cannot read calibration file {path}: no such file")
-    try:
-        storage = cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
-    except (cv2.error, SystemError):  # OpenCV's parser raises either on malformed text
-        storage = None
+    storage = _open_file_storage(cv2, path)
     if storage is None or not storage.isOpened():
         raise CalibrationError(
             f"calibration file {path} is not YAML/XML that OpenCV's FileStorage can read"
@@ -167,6 +164,26 @@ def _read_file_storage(path: str) -> dict[str, Any]:
         return {key: _node_value(storage.getNode(key)) for key in names}
     finally:
         storage.release()
+
+
+def _open_file_storage(cv2: Any, path: str) -> Any:
+    """``cv2.FileStorage`` of ``path``, or None. OpenCV 4 reads YAML only after a ``%YAML``
+    directive, which ROS's camera_info files lack: such a file is read again with one."""
+    try:
+        return cv2.FileStorage(path, cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError):  # OpenCV's parser raises either on malformed text
+        pass
+    if not path.endswith((".yaml", ".yml")):
+        return None
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+        if text.startswith("%YAML"):
+            return None
+        flags = cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY
+        return cv2.FileStorage("%YAML:1.0\n---\n" + text, flags)
+    except (OSError, UnicodeDecodeError, cv2.error, SystemError):
+        return None
 
 
 def _node_value(node: Any) -> Any:

@@ -31,3 +31,12 @@ def require(module: str, *, extra: str, feature: str) -> ModuleType:
             f"{feature} needs {module.split('.')[0]}, which is not installed; install the "
             f"{extra!r} extra: pip install 'bearing-slam[{extra}]'"
         ) from None
+
+
+def require_viewer(feature: str) -> None:
+    """Fail early, with one line, if Rerun (the ``viewer`` extra) is not installed.
+
+    Rerun 0.41 needs numpy >= 2; beside ROS 2 Jazzy (numpy 1.26) bearing-slam installs without
+    it, and only the commands that draw into Rerun need it.
+    """
+    require("rerun", extra="viewer", feature=feature)

@@ -45,6 +45,8 @@ def undistort_pixels(
     if calibration.distortion_model == "equidistant":
         d4 = d if d.size else np.zeros(4)
         out = cv2.fisheye.undistortPoints(pts, k, d4, criteria=_CRITERIA)
+    elif hasattr(cv2, "undistortPointsIter"):  # OpenCV 4: the iterations' criteria go here
+        out = cv2.undistortPointsIter(pts, k, d if d.size else None, None, None, _CRITERIA)
     else:
         out = cv2.undistortPoints(pts, k, d if d.size else None, criteria=_CRITERIA)
     xy = np.asarray(out, np.float64).reshape(-1, 2)

@@ -34,6 +34,9 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool, estimator: str) -> N
     Writes the simulated log, the derived log, the summary JSON and a Rerun recording of every
     stage into --out, then says how to open them.
     """
+    from replay.extras import require_viewer
+
+    require_viewer("bslam demo")
     from data_schemas.outputs import OutputGuard
     from recorder.sim.scenario import builtin_scenario
     from recorder.sim.simulate import simulate_to_file

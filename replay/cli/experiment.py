@@ -187,6 +187,7 @@ def _needs_extras() -> None:
     from replay.extras import require
 
     require("matplotlib", extra="experiments", feature="bslam experiment")
+    require("rerun", extra="experiments", feature="bslam experiment (its .rrd)")
 
 
 @click.group("experiment")

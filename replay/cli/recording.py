@@ -115,6 +115,9 @@ def live_view(
         return None
     if not chosen:
         return LiveView("terminal")
+    from replay.extras import require_viewer
+
+    require_viewer(f"--live --{chosen[0]}")
     return LiveView(chosen[0], connect or save_rrd)  # type: ignore[arg-type]
 
 

@@ -88,6 +88,9 @@ def replay(
     """
     import socket
 
+    from replay.extras import require_viewer
+
+    require_viewer("bslam replay")
     from data_schemas.mcap.processable import ProcessableLog
     from data_schemas.mcap.window import LogWindow
     from replay.cli.recording import viewing_hints

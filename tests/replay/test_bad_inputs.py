@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from logfactory import session_doc, write_log
 from mcap.reader import make_reader
 from mcap.writer import Writer
+from viewer import needs_viewer
 
 from data_schemas.mcap.layout import MESSAGE_HEADER
 from replay.cli import cli
@@ -87,7 +88,7 @@ EXPECTED = {
 }
 
 
-@pytest.mark.parametrize("command", ["process", "replay"])
+@pytest.mark.parametrize("command", ["process", pytest.param("replay", marks=needs_viewer)])
 @pytest.mark.parametrize("kind", sorted(EXPECTED))
 def test_bad_log_is_one_line_exit_1(tmp_path: Path, kind: str, command: str) -> None:
     log = _bad(tmp_path, kind)

@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 from logfactory import session_doc
+from viewer import needs_experiments, needs_viewer
 
 from data_schemas.mcap.writer import LogWriter
 from recorder.clock import VirtualClock
@@ -262,7 +263,7 @@ MOVEMENT = {
         ({"keyframe_timestamp": {"sec": 1}}, "field 'keyframe_timestamp.nsec' is missing"),
     ],
 )
-@pytest.mark.parametrize("command", ["process", "replay"])
+@pytest.mark.parametrize("command", ["process", pytest.param("replay", marks=needs_viewer)])
 def test_message_not_matching_its_schema_names_topic_time_and_field(
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
@@ -327,6 +328,7 @@ def _free_port() -> int:
     return port
 
 
+@needs_viewer
 def test_replay_connect_to_nothing_is_exit_1(small_log: Path) -> None:
     url = f"rerun+http://127.0.0.1:{_free_port()}/proxy"
     code, lines = invoke(["replay", str(small_log), "--connect", url])
@@ -335,6 +337,7 @@ def test_replay_connect_to_nothing_is_exit_1(small_log: Path) -> None:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="X11/Wayland check")
+@needs_viewer
 def test_replay_spawn_without_display_is_exit_1(
     small_log: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -364,6 +367,7 @@ def test_missing_distributed_names_the_extra(
     assert "needs distributed" in lines[0] and "'experiments' extra" in lines[0]
 
 
+@needs_experiments
 def test_experiment_exits_1_when_no_run_succeeds(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -381,6 +385,7 @@ def test_experiment_exits_1_when_no_run_succeeds(
     assert json.loads((out / "results.json").read_text())["runs"][0]["status"].startswith("failed")
 
 
+@needs_viewer
 def test_printed_commands_are_shell_quoted(tmp_path: Path, small_log: Path) -> None:
     import shlex
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from viewer import needs_viewer
 
 from replay.cli import cli
 
@@ -133,6 +134,7 @@ def test_first_output_explains_fl_and_the_landmark_count(small_log: Path, tmp_pa
 
 
 @pytest.mark.slow
+@needs_viewer
 def test_long_commands_draw_a_bar_on_a_terminal_only(tmp_path: Path) -> None:
     made = _piped(
         [*BSLAM, "simulate", "--scenario", "paper", "--seed", "1", "--out", "sim.mcap"], tmp_path
@@ -157,3 +159,20 @@ def test_long_commands_draw_a_bar_on_a_terminal_only(tmp_path: Path) -> None:
         )
         assert piped.returncode == 0, piped.stderr
         assert not BAR.search(piped.stderr), piped.stderr
+
+
+@pytest.mark.parametrize("command", ["replay", "demo"])
+def test_without_rerun_the_viewer_commands_name_the_extra(
+    small_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, command: str
+) -> None:
+    monkeypatch.setitem(sys.modules, "rerun", None)  # `import rerun` now fails, as uninstalled
+    out = tmp_path / "out"
+    args = ["replay", str(small_log), "--save", str(out)] if command == "replay" else []
+    args = args or ["demo", "--out", str(out)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1
+    assert result.output == (
+        f"Error: bslam {command} needs rerun, which is not installed; install the 'viewer' "
+        "extra: pip install 'bearing-slam[viewer]'\n"
+    )
+    assert not out.exists()

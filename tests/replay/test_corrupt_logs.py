@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from mcap.reader import make_reader
+from viewer import needs_viewer
 
 from replay.cli import cli
 
@@ -23,7 +24,7 @@ def _flip_in_movement(log: Path, out: Path) -> Path:
     return out
 
 
-@pytest.mark.parametrize("command", ["process", "replay", "info"])
+@pytest.mark.parametrize("command", ["process", pytest.param("replay", marks=needs_viewer), "info"])
 def test_corrupt_log_is_refused_in_one_line(small_log: Path, tmp_path: Path, command: str) -> None:
     broken = _flip_in_movement(small_log, tmp_path / "broken.mcap")
     args = [command, str(broken)]
@@ -43,7 +44,7 @@ def test_corrupt_log_is_refused_in_one_line(small_log: Path, tmp_path: Path, com
     assert not (tmp_path / "out.rrd").exists()
 
 
-@pytest.mark.parametrize("command", ["process", "replay"])
+@pytest.mark.parametrize("command", ["process", pytest.param("replay", marks=needs_viewer)])
 def test_skip_corrupt_warns_and_says_what_was_skipped(
     small_log: Path, tmp_path: Path, command: str
 ) -> None:

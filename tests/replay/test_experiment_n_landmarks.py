@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from viewer import needs_experiments
 
 from recorder.sim.scenario import builtin_scenario, scenario_from_dict
 from replay.cli import cli
@@ -25,6 +26,7 @@ def test_n_landmarks_replaces_the_landmarks_by_coded_ones() -> None:
         apply_scenario_param(base, "n_landmarks", 4.5)
 
 
+@needs_experiments
 def test_sweep_scores_every_groups_landmarks(tmp_path: Path) -> None:
     out = tmp_path / "sweep"
     args = ["experiment", "sweep", "--param", "n_landmarks", "--values", "4,6", "--runs", "1"]

@@ -8,11 +8,14 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from viewer import needs_experiments
 
 from replay.cli import COMMANDS, cli
 from replay.defaults import DISTANCE_PRIOR_REL
 from replay.experiments.results import read_results
 from replay.experiments.stats import movement_curve
+
+pytestmark = needs_experiments  # the experiment command needs its extra
 
 needs_simulate = pytest.mark.skipif(
     "simulate" not in COMMANDS, reason="`bslam simulate` (recorder branch) is not merged yet"

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from viewer import needs_viewer
 
 from data_schemas.errors import UnknownSchemaError
 from data_schemas.mcap.processable import ProcessableLog
@@ -109,6 +110,7 @@ def test_followed_channel_with_an_unknown_schema_is_one_line(
     assert "/robot/movement has schema 'bslam.Nope'" in str(live.value)
 
 
+@needs_viewer
 def test_replay_follow_of_an_interrupted_log_saves_what_it_read(
     small_log: Path, tmp_path: Path
 ) -> None:

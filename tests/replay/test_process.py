@@ -15,6 +15,7 @@ from click.testing import CliRunner
 from logfactory import MOVES, write_log
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
+from viewer import needs_experiments
 
 from data_schemas.codec import validate_message
 from replay.batch import LogJob, expand_logs, plan_jobs, process_job
@@ -299,6 +300,7 @@ def test_dask_local_cluster_gives_same_results(tmp_path: Path) -> None:
     assert [o.value for o in remote] == local
 
 
+@needs_experiments
 def test_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
     jobs = plan_jobs([write_log(tmp_path / "u.mcap")], None, None, MethodConfig())
     with pytest.raises(SchedulerError, match=r"^cannot reach the Dask scheduler at tcp://127"):

@@ -16,6 +16,7 @@ import pytest
 from click.testing import CliRunner
 from logfactory import MOVES, session_doc, write_log
 from mcap.reader import make_reader
+from viewer import needs_viewer
 
 from data_schemas.mcap.window import Bound, WindowError, parse_bound
 from replay.cli import cli
@@ -113,6 +114,7 @@ def test_windows_the_log_lacks_are_one_line_errors(small_log: Path) -> None:
     assert code == 2 and "'4' is not a bound" in output
 
 
+@needs_viewer
 def test_replay_takes_a_window(small_log: Path, tmp_path: Path) -> None:
     rrd = tmp_path / "w.rrd"
     code, output = _run("replay", str(small_log), "--from", "m2", "--save", str(rrd))

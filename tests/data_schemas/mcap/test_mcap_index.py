@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import inspect
 import io
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
+from mcap.reader import SeekingReader, make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 
 from data_schemas.mcap.chunks import McapChunkWriter
@@ -76,9 +77,7 @@ def test_same_messages_and_order_as_mcap(
     ids = [i for i, c in reader.get_summary().channels.items() if c.topic in topics]
     expected = _tuples(
         m
-        for _, _, m in reader.iter_messages(
-            topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=True
-        )
+        for _, _, m in reader.iter_messages(topics, log_time_order=True, **_range(start_ns, end_ns))
     )
     got = _fields(index.fields(ids, start_ns=start_ns, end_ns=end_ns))
     assert got == expected
@@ -272,3 +271,10 @@ def test_an_error_inside_a_pass_is_not_hidden_by_close(tmp_path: Path) -> None:
                 index.close()
         assert bytes(held) == data[100:200]
         held.release()
+
+
+def _range(start_ns: int | None, end_ns: int | None) -> dict[str, int | None]:
+    """``[start, end)`` as mcap's ``iter_messages`` names it (``start_time`` before mcap 1.6)."""
+    if "starting_at" in inspect.signature(SeekingReader.iter_messages).parameters:
+        return {"starting_at": start_ns, "ending_before": end_ns}
+    return {"start_time": start_ns, "end_time": end_ns}
