@@ -39,6 +39,30 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
 BENCH = Path(__file__).parent / "bench"
 
 
+#: Extras' packages a test module may import. Where one is missing (the lowest-versions run,
+#: ci/lowest.txt, installs no viewer or experiments extra) such a module is skipped, not an error.
+OPTIONAL_PACKAGES = frozenset({"rerun", "pyarrow", "matplotlib", "dask", "distributed", "rosbags"})
+
+
+class _ModuleOfExtras(pytest.Module):
+    """A test module skipped whole when it imports an extra's package that is not installed."""
+
+    def _getobj(self) -> object:
+        try:
+            return super()._getobj()
+        except pytest.Collector.CollectError as exc:
+            missing = exc.__cause__
+            name = (missing.name or "") if isinstance(missing, ModuleNotFoundError) else ""
+            if name.split(".")[0] in OPTIONAL_PACKAGES:
+                why = f"needs {name}, an extra's package (not installed)"
+                pytest.skip(why, allow_module_level=True)
+            raise
+
+
+def pytest_pycollect_makemodule(module_path: Path, parent: pytest.Collector) -> pytest.Module:
+    return _ModuleOfExtras.from_parent(parent, path=module_path)
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """Compile each module of the project once per run, not once per worker and per subprocess.
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy.integrate import trapezoid  # numpy.trapezoid is numpy 2 only
 
 from pipeline.priors import (
     GaussianPrior,
@@ -179,7 +180,7 @@ def test_angular_density_and_its_draws_against_the_truncated_normal() -> None:
     # draws: the truncated normal's std, by the trapezoid rule on its density written out
     x = np.linspace(-eps, eps, 20_001)
     dens = np.exp(-0.5 * (x / s) ** 2)
-    std = math.sqrt(float(np.trapezoid(x * x * dens, x) / np.trapezoid(dens, x)))
+    std = math.sqrt(float(trapezoid(x * x * dens, x) / trapezoid(dens, x)))
     draws = prior.sample_angle(200_000, np.random.default_rng(41))
     assert np.abs(draws).max() <= eps
     # 200k draws: the std's standard error is ~0.2 %

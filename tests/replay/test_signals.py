@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from viewer import needs_viewer
 
 ROOT = Path(__file__).resolve().parents[2]
 REGRESS = ROOT / "tests" / "data" / "regress"
@@ -107,7 +108,11 @@ def test_sigterm_to_simulate_finishes_the_log(tmp_path: Path) -> None:
     ("target", "args"),
     [
         ("replay.process.process_log", ["process", "{log}"]),
-        ("replay.rerun_out.replay_log", ["replay", "{log}", "--save", "{tmp}/o.rrd"]),
+        pytest.param(
+            "replay.rerun_out.replay_log",
+            ["replay", "{log}", "--save", "{tmp}/o.rrd"],
+            marks=needs_viewer,
+        ),
         ("replay.regress.run_regression", ["regress", "{regress}"]),
         (
             "recorder.sim.simulate.simulate_to_file",
