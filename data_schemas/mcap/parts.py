@@ -19,7 +19,7 @@ import heapq
 import itertools
 import json
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,12 +37,23 @@ class PartsError(BslamError):
     """Logs that cannot be split that way or merged."""
 
 
-def _copy(messages: Iterator[LogMessage], writer: LogWriter, clock: SettableClock) -> int:
+#: Called with the number of messages written so far (a progress bar).
+Progress = Callable[[int], object]
+
+
+def _copy(
+    messages: Iterator[LogMessage],
+    writer: LogWriter,
+    clock: SettableClock,
+    progress: Progress | None = None,
+) -> int:
     count = 0
     for msg in messages:
         clock.t_ns = msg.log_time_ns
         writer.write(msg.topic, json.loads(msg.data), schema=msg.schema)
         count += 1
+        if progress is not None:
+            progress(1)
     return count
 
 
@@ -61,12 +72,18 @@ def _cut_ns(log: ProcessableLog, bound: Bound) -> int:
 
 
 def split_log(
-    log: PathLike, at: Sequence[Bound], outs: Sequence[PathLike], *, force: bool = False
+    log: PathLike,
+    at: Sequence[Bound],
+    outs: Sequence[PathLike],
+    *,
+    force: bool = False,
+    progress: Progress | None = None,
 ) -> list[int]:
     """Cut ``log`` at the bounds ``at`` (in order) into ``len(at) + 1`` logs ``outs``.
 
     A part ends just before the next one starts: ``--at m5`` puts movement 5 (from its start
-    keyframe) and what follows in the second part. Returns each part's message count.
+    keyframe) and what follows in the second part. Returns each part's message count;
+    ``progress`` is called with 1 after each message written.
 
     Raises
     ------
@@ -95,7 +112,7 @@ def split_log(
                 clock = SettableClock()
                 with LogWriter(path, source.session.doc, clock=clock, fsync=False) as writer:
                     part = source.messages(start_ns=edges[k], end_ns=edges[k + 1])
-                    counts.append(_copy(part, writer, clock))
+                    counts.append(_copy(part, writer, clock, progress))
     return counts
 
 
@@ -136,8 +153,15 @@ def _check_no_overlap(logs: Sequence[ProcessableLog]) -> None:
                 )
 
 
-def merge_logs(logs: Sequence[PathLike], out: PathLike, *, force: bool = False) -> int:
-    """Merge logs of one session into ``out``, in log-time order; return the message count.
+def merge_logs(
+    logs: Sequence[PathLike],
+    out: PathLike,
+    *,
+    force: bool = False,
+    progress: Progress | None = None,
+) -> int:
+    """Merge logs of one session into ``out``, in log-time order; return the message count
+    (``progress`` is called with 1 after each message written).
 
     Raises
     ------
@@ -160,4 +184,4 @@ def merge_logs(logs: Sequence[PathLike], out: PathLike, *, force: bool = False) 
         with LogWriter(staged, doc, clock=clock, fsync=False) as writer:
             streams = [log.messages() for log in opened]
             merged = heapq.merge(*streams, key=lambda m: m.log_time_ns)
-            return _copy(merged, writer, clock)
+            return _copy(merged, writer, clock, progress)

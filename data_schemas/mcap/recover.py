@@ -11,6 +11,7 @@ place (:mod:`data_schemas.outputs`), so it never replaces its input or a file it
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
@@ -77,7 +78,11 @@ class RecoverReport:
 
 
 def recover_log(
-    broken: str | os.PathLike[str], fixed: str | os.PathLike[str], *, force: bool = False
+    broken: str | os.PathLike[str],
+    fixed: str | os.PathLike[str],
+    *,
+    force: bool = False,
+    progress: Callable[[int], object] | None = None,
 ) -> RecoverReport:
     """Rewrite every record of ``broken`` that checks out into a new indexed log ``fixed``.
 
@@ -87,6 +92,8 @@ def recover_log(
         Input and output; ``fixed`` must not be ``broken`` or a link to it.
     force : bool
         Replace an existing ``fixed`` (never the input).
+    progress : callable, optional
+        Called with the number of messages rewritten so far, after each one (a progress bar).
 
     Raises
     ------
@@ -114,6 +121,8 @@ def recover_log(
                     [record.data],
                 )
                 messages += 1
+                if progress is not None:
+                    progress(messages)
                 if writer.pending_bytes >= _RECOVER_CHUNK_BYTES:
                     writer.close_chunk()
             elif isinstance(record, Schema):

@@ -52,7 +52,7 @@ def _run(importer: Importer, out: str, force: bool) -> None:
 
     from replay.importers.write import import_log
 
-    with tqdm(unit="msg", file=sys.stderr, desc="importing", delay=0.5) as bar:
+    with tqdm(unit="msg", file=sys.stderr, desc="importing", delay=0.5, disable=None) as bar:
 
         def progress(done: int, total: int) -> None:
             bar.total = total

@@ -37,9 +37,11 @@ def split(log: Path, at: tuple[Bound, ...], out_dir: Path | None, force: bool) -
     processed, replayed or merged back.
     """
     from data_schemas.mcap.parts import part_paths, split_log
+    from replay.sinks.progress import progress_bar
 
     outs = part_paths(log, len(at) + 1, out_dir)
-    counts = split_log(log, at, outs, force=force)
+    with progress_bar(desc="splitting", unit="msg") as bar:
+        counts = split_log(log, at, outs, force=force, progress=bar.update)
     for path, count in zip(outs, counts, strict=True):
         click.echo(f"wrote {path}: {count} messages")
 
@@ -55,6 +57,8 @@ def merge(logs: tuple[Path, ...], out: Path, force: bool) -> None:
     holds the frames and the map, for Foxglove. Logs of different sessions are refused.
     """
     from data_schemas.mcap.parts import merge_logs
+    from replay.sinks.progress import progress_bar
 
-    count = merge_logs(logs, out, force=force)
+    with progress_bar(desc="merging", unit="msg") as bar:
+        count = merge_logs(logs, out, force=force, progress=bar.update)
     click.echo(f"wrote {out}: {count} messages from {len(logs)} logs")

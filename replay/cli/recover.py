@@ -19,8 +19,10 @@ def recover(broken: str, fixed: str, force: bool) -> None:
     be read.
     """
     from data_schemas.mcap.recover import recover_log
+    from replay.sinks.progress import progress_bar
 
-    report = recover_log(broken, fixed, force=force)
+    with progress_bar(desc="recovering", unit="msg") as bar:
+        report = recover_log(broken, fixed, force=force, progress=lambda n: bar.update(n - bar.n))
     lines = report.lines(broken, fixed)
     click.echo(lines[0])
     for line in lines[1:]:

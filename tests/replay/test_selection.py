@@ -198,3 +198,22 @@ def test_merge_refuses_other_sessions_and_overlaps(small_log: Path, tmp_path: Pa
     code, output = _run("merge", str(small_log), str(small_log), "--out", str(tmp_path / "m.mcap"))
     assert code == 1 and "over the same time" in output
     assert not (tmp_path / "m.mcap").exists()
+
+
+def test_split_merge_and_recover_report_progress_per_message(
+    small_log: Path, tmp_path: Path
+) -> None:
+    from data_schemas.mcap.parts import merge_logs, part_paths, split_log
+    from data_schemas.mcap.recover import recover_log
+
+    total = len(_read(small_log))
+    ticks: list[int] = []
+    outs = part_paths(small_log, 2, tmp_path)
+    assert sum(split_log(small_log, [parse_bound("m1")], outs, progress=ticks.append)) == total
+    assert ticks == [1] * total
+    ticks.clear()
+    assert merge_logs(outs, tmp_path / "m.mcap", progress=ticks.append) == total
+    assert ticks == [1] * total
+    done: list[int] = []
+    recover_log(small_log, tmp_path / "r.mcap", progress=done.append)
+    assert done == list(range(1, total + 1))
