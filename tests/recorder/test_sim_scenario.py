@@ -219,3 +219,32 @@ def test_not_an_object(tmp_path: Path) -> None:
 def test_unknown_builtin() -> None:
     with pytest.raises(ScenarioError, match="paper_omni"):
         builtin_scenario("nope")
+
+
+def test_pinhole_scenario_camera() -> None:
+    """A pinhole camera 60 deg wide over 320 columns has fx = 160 / tan(30 deg); its
+    distortion is kept; it round-trips; fov_deg on a panorama, or a bad distortion, is refused."""
+    from data_schemas.calibration import PinholeCalibration
+
+    doc = paper_doc()
+    doc["camera"] = {
+        "model": "pinhole",
+        "width": 320,
+        "height": 240,
+        "fov_deg": 60,
+        "distortion": [-0.2, 0.05, 0, 0],
+    }
+    s = scenario_from_dict(doc)
+    cal = s.calibration()
+    assert isinstance(cal, PinholeCalibration)
+    assert cal.fx == pytest.approx(160.0 / math.tan(math.radians(30.0)))
+    assert (cal.cx, cal.cy, cal.distortion) == (159.5, 119.5, (-0.2, 0.05, 0.0, 0.0))
+    assert scenario_from_dict(s.to_dict()) == s
+    validate("bslam.Scenario", s.to_dict())
+    panorama = paper_doc()
+    panorama["camera"]["fov_deg"] = 60
+    with pytest.raises(ScenarioError, match="fov_deg and distortion are for a pinhole camera"):
+        scenario_from_dict(panorama)
+    doc["camera"]["distortion"] = [0.1]
+    with pytest.raises(ScenarioError, match="takes 4 or 5 coefficients"):
+        scenario_from_dict(doc)
