@@ -43,6 +43,7 @@ from pipeline.joint.geometry import (
 )
 from pipeline.joint.noise import NoiseEstimate, estimate_noise, robust_std
 from pipeline.joint.result import JointMovementResult
+from pipeline.joint.table import BearingTable, by_landmark
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation
 from pipeline.triangulate import triangulate_fr
@@ -75,6 +76,12 @@ RETUNE_RATIO = 1.5
 RETUNE_DOF = 10
 #: A bearing this many eps from the map is taken out of the graph (the error bound is eps).
 REJECT_EPS = 2.0
+#: Up to this many movements the map is solved carefully: Powell's dogleg steps, relinearization
+#: threshold 1e-3 and one more step after every update (a Gauss-Newton step from the bootstrap's
+#: optimum along a barely determined direction can throw the map away); from then on, with the
+#: map determined, plain Gauss-Newton steps relinearized per variable, whose cost per movement
+#: does not grow with the dogleg's steps over the whole tree.
+CAREFUL_MOVEMENTS = 50
 #: A rejected bearing this close (eps) to the map is put back.
 READMIT_EPS = 1.5
 #: More than this fraction of the bearings beyond REJECT_EPS eps: the map is wrong, not them.
@@ -124,7 +131,7 @@ class _Snapshot:
     estimates: dict[str, LandmarkEstimate]
     noise: NoiseEstimate | None
     sigma_model_rad: float
-    values: gtsam.Values
+    values: gtsam.Values  # never changed in place: held, not copied
 
 
 class JointSlam:
@@ -198,34 +205,74 @@ class JointSlam:
         # movements the bearings did not determine: what they saw, where the fit put them
         self._undetermined: dict[int, tuple[_Seen, NDArray[np.float64], NDArray[np.bool_]]] = {}
         self._estimates: dict[str, LandmarkEstimate] = {}
-        # the residuals of the map as it is (see _residuals)
-        self._residual_memo: (
-            tuple[gtsam.Values, tuple[int, int, int], list[g.Bearing], NDArray[np.float64]] | None
-        ) = None
+        # the map's bearings as arrays, and their residuals at the map as it is (_residuals)
+        self._table = BearingTable()
+        self._residual_memo: tuple[gtsam.Values, int, NDArray[np.float64]] | None = None
         self.noise: NoiseEstimate | None = None
         self.reinitializations = 0
+        self._careful = True
         self._isam = self._new_isam()
-        self._values = gtsam.Values()
+        # iSAM2's estimate of every variable, computed when first asked after an update
+        self._estimate: gtsam.Values | None = gtsam.Values()
 
     # ------------------------------------------------------------------ state
-    @staticmethod
-    def _new_isam() -> gtsam.ISAM2:
+    def _new_isam(self) -> gtsam.ISAM2:
+        """A fresh iSAM2, careful while the map has fewer than :data:`CAREFUL_MOVEMENTS`."""
+        self._careful = len(self._placed) < CAREFUL_MOVEMENTS
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(1e-3)
         params.relinearizeSkip = 1
         params.setFactorization("QR")
-        params.setOptimizationParams(gtsam.ISAM2DoglegParams())
+        if self._careful:
+            params.setRelinearizeThreshold(1e-3)
+            params.setOptimizationParams(gtsam.ISAM2DoglegParams())
+        else:
+            params.setRelinearizeThreshold(g.relinearize_thresholds())
+            params.enablePartialRelinearizationCheck = True
+            params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams())
         return gtsam.ISAM2(params)
+
+    @property
+    def _values(self) -> gtsam.Values:
+        """Every variable as iSAM2 estimates it now (one back-substitution after an update,
+        then kept until the next; never changed in place)."""
+        if self._estimate is None:
+            self._estimate = self._isam.calculateEstimate()
+        return self._estimate
+
+    @_values.setter
+    def _values(self, values: gtsam.Values) -> None:
+        self._estimate = values
+
+    def _retable(self) -> None:
+        """The bearing table built anew from the placed movements (after a change of the map
+        other than bearings added or rejected)."""
+        self._table = BearingTable()
+        self._table.add(self._bearings(), self._lm_index, self._rejected)
 
     def _key(self, name: str) -> int:
         return g.landmark_key(self._lm_index[name])
 
     def _point(self, name: str) -> NDArray[np.float64]:
+        if self._estimate is None:  # one variable, not the whole map
+            return np.asarray(self._isam.calculateEstimatePoint2(self._key(name)), np.float64)
         return np.asarray(self._values.atPoint2(self._key(name)), np.float64)
 
+    def _has(self, key: int) -> bool:
+        if self._estimate is None:
+            return bool(self._isam.valueExists(key))
+        return bool(self._estimate.exists(key))
+
+    def _pose2(self, key: int) -> gtsam.Pose2:
+        if self._estimate is None:
+            return self._isam.calculateEstimatePose2(key)
+        return self._values.atPose2(key)
+
     def _movement_pose(self, movement: int, values: gtsam.Values | None = None) -> MovementPose:
-        v = self._values if values is None else values
-        p1, p2 = v.atPose2(g.pose_key(movement, 0)), v.atPose2(g.pose_key(movement, 1))
+        k1, k2 = g.pose_key(movement, 0), g.pose_key(movement, 1)
+        if values is None:
+            p1, p2 = self._pose2(k1), self._pose2(k2)
+        else:
+            p1, p2 = values.atPose2(k1), values.atPose2(k2)
         o1 = np.array([p1.x(), p1.y()])
         o2 = np.array([p2.x(), p2.y()])
         return MovementPose(o1, p1.theta(), max(float(np.hypot(*(o2 - o1))), 1e-9))
@@ -239,9 +286,11 @@ class JointSlam:
     def unit_m(self) -> float | None:
         """The map's unit |L1 L2| in metres, estimated through the distance prior (None without
         it, or before a movement with a distance is in the map)."""
-        if not self._values.exists(g.SCALE_KEY):
+        if not self._has(g.SCALE_KEY):
             return None
-        return math.exp(-float(self._values.atVector(g.SCALE_KEY)[0]))
+        if self._estimate is None:
+            return math.exp(-float(self._isam.calculateEstimateVector(g.SCALE_KEY)[0]))
+        return math.exp(-float(self._estimate.atVector(g.SCALE_KEY)[0]))
 
     @property
     def bearing_scatter(self) -> dict[str, tuple[int, float]]:
@@ -251,19 +300,12 @@ class JointSlam:
         rays meet at one point; well above for bearings of several landmarks given one name."""
         if self.noise is None:
             return {}
-        return self._scatter_of(*self._residuals())
-
-    def _scatter_of(
-        self, used: Sequence[g.Bearing], r: NDArray[np.float64]
-    ) -> dict[str, tuple[int, float]]:
-        """:attr:`bearing_scatter` from the map's bearings and their residuals (rad)."""
-        assert self.noise is not None
-        by: dict[str, list[float]] = {}
-        for b, x in zip(used, np.abs(r), strict=True):
-            if b.landmark not in self.reference:
-                by.setdefault(b.landmark, []).append(float(x))
         sigma = max(self.noise.sigma_rad, 1e-12)
-        return {n: (len(v), robust_std(np.array(v)) / sigma) for n, v in by.items()}
+        skip = [self._lm_index[n] for n in self.reference]
+        return {
+            self.landmarks[j]: (v.size, robust_std(v) / sigma)
+            for j, v in by_landmark(self._table, self._residuals(), skip).items()
+        }
 
     @property
     def used_movements(self) -> list[int]:
@@ -459,7 +501,7 @@ class JointSlam:
             graph.add(g.weak_pose_prior(key, p2))
         distance = self._distance_m(m)
         if distance is not None:
-            if not values.exists(g.SCALE_KEY) and not self._values.exists(g.SCALE_KEY):
+            if not values.exists(g.SCALE_KEY) and not self._has(g.SCALE_KEY):
                 log_scale = math.log(pose.length_fl / distance)
                 values.insert(g.SCALE_KEY, np.array([log_scale]))
                 graph.add(g.weak_scale_prior(log_scale))
@@ -475,6 +517,8 @@ class JointSlam:
                 self._add_bearing(graph, b, noise)
             else:
                 self._pending.setdefault(b.landmark, []).append(b)
+        mapped = [b for b in m.bearings if b.landmark in self._in_graph]
+        self._table.add(mapped, self._lm_index, outliers or ())
 
     def _enter_pending(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> list[str]:
         """Landmarks that can enter the graph now, with their waiting bearings."""
@@ -486,8 +530,10 @@ class JointSlam:
                 continue
             values.insert(self._key(name), point)
             graph.add(g.weak_point_prior(self._key(name), point))
-            for bearing in self._pending.pop(name):
+            waiting = self._pending.pop(name)
+            for bearing in waiting:
                 self._add_bearing(graph, bearing, noise)
+            self._table.add(waiting, self._lm_index)
             self._in_graph.add(name)
             entered.append(name)
         return entered
@@ -505,14 +551,16 @@ class JointSlam:
         values: gtsam.Values,
         remove: Sequence[int] = (),
     ) -> None:
-        """One iSAM2 update (plus one more relinearization step), factor indices recorded."""
+        """One iSAM2 update, factor indices recorded (one more relinearization step while the
+        map is careful, :data:`CAREFUL_MOVEMENTS`); the estimate is computed when asked."""
         result = self._isam.update(graph, values, list(remove))
         index = result.getNewFactorsIndices()
         for pos, b in self._staged:
             self._factor_of[b] = int(index[pos])
         self._staged.clear()
-        self._isam.update()
-        self._values = self._isam.calculateEstimate()
+        self._estimate = None
+        if self._careful:
+            self._isam.update()
 
     def _reject_outliers(self) -> None:
         """Take out bearings beyond :data:`REJECT_EPS` eps of the map; put back rejected ones
@@ -520,17 +568,10 @@ class JointSlam:
 
         The method's bearing error is bounded by eps, so a residual that far is a wrong
         detection (the Huber loss only bounds its pull)."""
-        used, r = self._residuals()
-        out = [
-            b
-            for b, x in zip(used, r, strict=True)
-            if b not in self._rejected and abs(x) > REJECT_EPS * self.eps_rad
-        ]
-        back = [
-            b
-            for b, x in zip(used, r, strict=True)
-            if b in self._rejected and abs(x) <= READMIT_EPS * self.eps_rad
-        ]
+        r = np.abs(self._residuals())
+        rejected = self._table.rejected
+        out = self._table.select(~rejected & (r > REJECT_EPS * self.eps_rad))
+        back = self._table.select(rejected & (r <= READMIT_EPS * self.eps_rad))
         if not out and not back:
             return
         graph = gtsam.NonlinearFactorGraph()
@@ -540,19 +581,25 @@ class JointSlam:
             self._add_bearing(graph, b, noise)
         remove = [self._factor_of.pop(b) for b in out]
         self._rejected.update(out)
+        self._table.set_rejected(back, False)
+        self._table.set_rejected(out, True)
         self._update(graph, gtsam.Values(), remove)
 
     def _reseat_landmarks(self) -> list[str]:
         """Landmarks moved to where their rays meet, when most of their bearings were rejected
         (the landmark is wrong, not its bearings: it entered from a poor first estimate); the
         map is then rebuilt with those bearings back in."""
-        values = gtsam.Values(self._values)
+        skip = [self._lm_index[n] for n in self.reference]
+        n_rows = by_landmark(self._table, np.ones(len(self._table), np.int64), skip)
+        n_rejected = by_landmark(self._table, self._table.rejected.astype(np.int64), skip)
+        values: gtsam.Values | None = None
         moved = []
-        for name in sorted(self._in_graph - set(self.reference), key=self._lm_index.__getitem__):
-            own = [b for b in self._bearings() if b.landmark == name]
-            n_out = sum(1 for b in own if b in self._rejected)
-            if n_out < RESEAT_MIN_REJECTED or n_out <= len(own) - n_out:
+        for j, out_j in n_rejected.items():
+            n_out = int(out_j.sum())
+            if n_out < RESEAT_MIN_REJECTED or n_out <= n_rows[j].size - n_out:
                 continue
+            name = self.landmarks[j]
+            own = self._table.select(self._table.landmark == j)
             poses = [self._values.atPose2(g.pose_key(b.movement, b.end)) for b in own]
             origins = np.array([(p.x(), p.y()) for p in poses], np.float64)
             headings = np.array([p.theta() for p in poses], np.float64)
@@ -564,10 +611,13 @@ class JointSlam:
             r = wrap_rad(bearings - predicted_bearings(origins, headings, pts))
             if int((np.abs(r) <= REJECT_EPS * self.eps_rad).sum()) <= len(own) - n_out:
                 continue
+            if values is None:
+                values = gtsam.Values(self._values)
             values.update(self._key(name), fix.point_fl)
             self._rejected.difference_update(own)
+            self._table.set_rejected(own, False)
             moved.append(name)
-        if moved:
+        if values is not None:
             self._rebuild(values)
         return moved
 
@@ -655,7 +705,7 @@ class JointSlam:
             why = f"bootstrap failed ({str(exc).strip().splitlines()[0]})"
         if solved is not None:
             self._values = solved
-            _, r = self._residuals()
+            r = self._residuals()
             robust = robust_std(r) if r.size else 0.0
             why = (
                 f"bootstrap does not fit (robust residual {math.degrees(robust):.2f} deg > eps)"
@@ -669,6 +719,7 @@ class JointSlam:
             self._in_graph = set(self.reference)
             self._pending.clear()
             self._staged.clear()
+            self._table = BearingTable()
             self._values = gtsam.Values()
             return why or "bootstrap failed"
         self._isam = self._new_isam()
@@ -681,7 +732,7 @@ class JointSlam:
         origins, dirs = [], []
         for b in self._pending.get(name, []):
             key = g.pose_key(b.movement, b.end)
-            pose = values.atPose2(key) if values.exists(key) else self._values.atPose2(key)
+            pose = values.atPose2(key) if values.exists(key) else self._pose2(key)
             origins.append((pose.x(), pose.y()))
             dirs.append(pose.theta() + b.bearing_rad)
         fix = intersect_rays(
@@ -787,38 +838,16 @@ class JointSlam:
         return values
 
     # ------------------------------------------------------------------ checks
-    def _residuals(self) -> tuple[list[g.Bearing], NDArray[np.float64]]:
-        """Every bearing of the map (:meth:`_bearings`) and its residual (rad) under the
-        current values; kept until the values are replaced or the bearings change."""
-        sig = (
-            len(self._placed),
-            len(self._in_graph),
-            sum(len(self._placed[k].bearings) for k in self._placed),
-        )
+    def _residuals(self) -> NDArray[np.float64]:
+        """The residual (rad) of every bearing of the map (a row of the bearing table) under
+        the current values; kept until the values are replaced or the table changes."""
         memo = self._residual_memo
-        if memo is not None and memo[0] is self._values and memo[1] == sig:
-            return memo[2], memo[3]
-        used, r = self._compute_residuals()
+        if memo is not None and memo[0] is self._values and memo[1] == self._table.version:
+            return memo[2]
+        r = self._table.residuals(self._values)
         r.setflags(write=False)  # shared by the callers until the map changes
-        self._residual_memo = (self._values, sig, used, r)  # holds the values: no id reuse
-        return used, r
-
-    def _compute_residuals(self) -> tuple[list[g.Bearing], NDArray[np.float64]]:
-        used = self._bearings()
-        if not used:
-            return used, np.zeros(0)
-        keyframes: dict[tuple[int, int], tuple[float, float, float]] = {}
-        for k in self._placed:
-            for end in (0, 1):
-                p = self._values.atPose2(g.pose_key(k, end))
-                keyframes[k, end] = (p.x(), p.y(), p.theta())
-        points = {n: self._point(n) for n in self._in_graph}
-        xyh = np.array([keyframes[b.movement, b.end] for b in used])
-        o, h = xyh[:, :2], xyh[:, 2]
-        pts = np.array([points[b.landmark] for b in used])
-        meas = np.array([b.bearing_rad for b in used])
-        r = np.asarray(wrap_rad(meas - predicted_bearings(o, h, pts)), np.float64)
-        return used, r
+        self._residual_memo = (self._values, self._table.version, r)  # holds the values
+        return r
 
     def _n_params(self) -> int:
         """Free parameters of the keyframes and landmarks. The bearings still determine them
@@ -843,12 +872,8 @@ class JointSlam:
     def _misfit(self, rms_limit_rad: float) -> str:
         """Why the residuals are out of bounds: too many beyond :data:`REJECT_EPS` eps, or a
         robust RMS over ``rms_limit_rad`` (empty if they are not)."""
-        used, r = self._residuals()
-        far = sum(
-            1
-            for b, x in zip(used, r, strict=True)
-            if b not in self._rejected and abs(x) > REJECT_EPS * self.eps_rad
-        )
+        r = self._residuals()
+        far = int((~self._table.rejected & (np.abs(r) > REJECT_EPS * self.eps_rad)).sum())
         if far > max(1, MAX_REJECT_FRACTION * r.size):
             return f"{far} of {r.size} bearings more than {REJECT_EPS:g} eps from the map"
         noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
@@ -858,14 +883,14 @@ class JointSlam:
         return ""
 
     def _update_estimates(self) -> None:
-        _, r = self._residuals()
+        r = self._residuals()
         self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
         n = self.noise
         off = abs(math.log(n.sigma_rad / self.sigma_model_rad))
         if n.dof >= RETUNE_DOF and off > math.log(RETUNE_RATIO):
             self.sigma_model_rad = n.sigma_rad
             self._rebuild(self._values)
-            _, r = self._residuals()
+            r = self._residuals()
             self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
         scale = (self.noise.sigma_rad / self.sigma_model_rad) ** 2
         out = {}
@@ -887,6 +912,7 @@ class JointSlam:
         self._estimates.pop(name, None)
         if name in self._in_graph:
             self._in_graph.discard(name)
+            self._retable()
             values = gtsam.Values(self._values)
             values.erase(self._key(name))
             self._rebuild(values)
@@ -971,6 +997,8 @@ class JointSlam:
         if obs.index in self._placed or obs.index in self._waiting:
             raise EstimationError(f"movement {obs.index} was already processed")
         m = _Movement(obs.index, obs.turn_rad, bearings, obs.distance_m)
+        if self._careful and len(self._placed) >= CAREFUL_MOVEMENTS:
+            self._rebuild(self._values)  # the map is determined: plain steps from now on
         snapshot = self._snapshot()
         self._waiting[obs.index] = m
         before = self.estimates
@@ -1027,7 +1055,7 @@ class JointSlam:
             dict(self._estimates),
             self.noise,
             self.sigma_model_rad,
-            gtsam.Values(self._values),
+            self._values,
         )
 
     def _roll_back(
@@ -1047,6 +1075,7 @@ class JointSlam:
         self.noise, self.sigma_model_rad = snap.noise, snap.sigma_model_rad
         self._staged.clear()
         self._factor_of.clear()
+        self._retable()
         if self._placed:
             self._rebuild(snap.values)
         else:

@@ -29,6 +29,22 @@ HUBER_K = 1.345
 FREE_LENGTH_SIGMA_FL = 100.0
 
 
+#: iSAM2 relinearizes a variable once its update since the last linearization exceeds this:
+#: keyframe (x, y in FL, heading in rad), landmark (x, y in FL), log scale.
+RELINEARIZE_POSE = (5e-3, 5e-3, 5e-3)
+RELINEARIZE_POINT_FL = 5e-3
+RELINEARIZE_LOG_SCALE = 5e-3
+
+
+def relinearize_thresholds() -> gtsam.ISAM2ThresholdMap:
+    """Per-variable relinearization thresholds for iSAM2, by key letter."""
+    out = gtsam.ISAM2ThresholdMap()
+    out.insert(("x", np.array(RELINEARIZE_POSE)))
+    out.insert(("l", np.full(2, RELINEARIZE_POINT_FL)))
+    out.insert(("s", np.array([RELINEARIZE_LOG_SCALE])))
+    return out
+
+
 #: Key of the map's scale (log of FL units per metre), present only with a distance prior.
 SCALE_KEY = int(gtsam.symbol("s", 0))
 

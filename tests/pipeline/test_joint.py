@@ -560,6 +560,51 @@ def test_bearing_scatter_singles_out_a_landmark_whose_rays_do_not_meet() -> None
         assert max(clean["L3"][1], clean["L4"][1]) < 1.3, (seed, clean)
 
 
+def test_bearing_scatter_counts_every_bearing_of_the_map_with_its_residual() -> None:
+    """The scatter the map reports (its bearings kept as arrays, rejected ones included) equals
+    one computed here bearing by bearing from the keyframes and landmarks it reports, on a run
+    with wrong detections (taken out of the graph) and a landmark forgotten and given again;
+    12 landmarks."""
+    rng = np.random.default_rng(5)
+    ref = {"L1": (1.2, 1.7), "L2": (1.8, 1.7)}
+    pts = scatter_landmarks(rng, ref, 12, (0.05, 0.05), (2.95, 1.95), 0.12)
+    run = simulate_bearings(
+        25, rng, eps_rad=EPS, landmarks_world=pts, arena_m=(3.0, 2.0), move_m=(0.3, 0.6)
+    )
+    obs = list(run.observations)
+    for k in (6, 11, 17):  # one wrong detection each (40 deg off)
+        b = dict(obs[k].bearings_o2_rad)
+        b["L5"] += math.radians(40.0)
+        obs[k] = replace(obs[k], bearings_o2_rad=b)
+    slam = _slam(run, PAPER_REFERENCE, 5)
+    for o in obs[:15]:
+        slam.process_movement(o)
+    slam.forget("L7")
+    for o in obs[15:]:
+        slam.process_movement(o)
+    poses = slam.keyframe_poses()
+    means = {n: e.mean_fl for n, e in slam.estimates.items()}
+    sigma = slam.noise.sigma_rad if slam.noise is not None else math.nan
+    residuals: dict[str, list[float]] = {}
+    for o in obs:
+        for end, bearings in enumerate((o.bearings_o1_rad, o.bearings_o2_rad)):
+            if (o.index, end) not in poses:
+                continue
+            pose = poses[o.index, end]
+            for name, b in bearings.items():
+                if name not in means or (name == "L7" and o.index < 15):
+                    continue
+                dx, dy = means[name] - pose.origin_fl
+                r = b - (math.atan2(dy, dx) - pose.heading_rad)
+                residuals.setdefault(name, []).append(abs(math.remainder(r, 2 * math.pi)))
+    expected = {n: (len(v), 1.4826 * float(np.median(v)) / sigma) for n, v in residuals.items()}
+    scatter = slam.bearing_scatter
+    assert set(scatter) == set(expected)
+    for name, (count, scale) in expected.items():
+        assert scatter[name][0] == count, name
+        assert scatter[name][1] == pytest.approx(scale, rel=1e-6), name
+
+
 def test_a_landmark_given_after_the_last_movement_enters_the_map_when_it_settles() -> None:
     # L3 forgotten after the last movement, then its bearings given again (as an association
     # step does when it names a landmark once the log is processed): settle() puts it back

@@ -1,0 +1,217 @@
+"""Benchmark: the joint estimator over long runs (issue 31), not in the default run.
+
+Synthetic bearings (no images), every movement with its driven distance (2% noise) and the
+distance prior ``process`` uses. CPU time (``time.process_time``) per movement of
+``JointSlam.process_movement``.
+
+``test_marginal_cost_late_against_early``: 1,000 movements on the paper arena (4 landmarks) and
+on a 16-landmark arena (3 x 2 m); the yardstick is the same run early: the median CPU per
+movement over movements 500-999 against that over movements 50-99. Goal: at most 1.3x.
+
+``test_update_against_plain_isam2``: per movement, the estimator's own work (its whole
+``process_movement`` less the paper filter it runs as initializer) against a plain iSAM2 (GTSAM's
+default parameters, one ``update()`` per update of the estimator, nothing else computed) given the
+same factors and initial values, the two alternated movement by movement. Goal: medians at most
+3x.
+
+``test_growth_law``: the CPU per movement against movements and landmarks (4, 8, 16, 32
+landmarks, 1,000 movements each), written with a plot to ``$BSLAM_BENCH_OUT`` (default: a
+temporary folder) as ``growth.json`` and ``growth.png`` (docs/benchmarks.md).
+
+Run with ``python -m pytest tests/bench/test_bench_growth.py -s -n 0``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import statistics
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import gtsam
+import numpy as np
+import pytest
+
+from pipeline.joint.estimator import JointSlam
+from pipeline.slam import MovementObservation
+from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, scatter_landmarks, simulate_bearings
+
+EPS = math.radians(3.0)
+DISTANCE_PRIOR_REL = 0.05  # replay's default (pipeline.estimators.DEFAULT_DISTANCE_PRIOR_REL)
+
+
+def _run(n_movements: int, n_landmarks: int, seed: int) -> SimulatedRun:
+    """A simulated run with each movement's driven distance (true length, 2% noise)."""
+    rng = np.random.default_rng(seed)
+    if n_landmarks == 4:
+        run = simulate_bearings(n_movements, rng, eps_rad=EPS)
+    else:
+        ref = {"L1": (1.2, 1.7), "L2": (1.8, 1.7)}
+        pts = scatter_landmarks(rng, ref, n_landmarks, (0.05, 0.05), (2.95, 1.95), 0.12)
+        run = simulate_bearings(
+            n_movements,
+            rng,
+            eps_rad=EPS,
+            sigma_frac=1 / 3,
+            landmarks_world=pts,
+            arena_m=(3.0, 2.0),
+            move_m=(0.3, 0.6),
+        )
+    lengths = np.hypot(*(run.o2_world - run.o1_world).T)
+    obs = [
+        replace(o, distance_m=float(d * (1.0 + rng.normal(0.0, 0.02))))
+        for o, d in zip(run.observations, lengths, strict=True)
+    ]
+    return replace(run, observations=obs)
+
+
+def _slam(run: SimulatedRun, seed: int) -> JointSlam:
+    return JointSlam(
+        list(run.landmarks_world),
+        PAPER_REFERENCE,
+        vision_error_rad=EPS,
+        rng=np.random.default_rng(seed),
+        distance_prior_rel=DISTANCE_PRIOR_REL,
+    )
+
+
+def _cpu_per_movement(run: SimulatedRun, seed: int) -> tuple[list[float], float]:
+    """CPU seconds of each movement, and the mean error of the final map (FL)."""
+    slam = _slam(run, seed)
+    spent = []
+    for obs in run.observations:
+        tick = time.process_time()
+        slam.process_movement(obs)
+        spent.append(time.process_time() - tick)
+    truth = run.truth_fl()
+    err = [float(np.hypot(*(e.mean_fl - truth[n]))) for n, e in slam.estimates.items()]
+    return spent, float(np.mean(err))
+
+
+def _out_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = os.environ.get("BSLAM_BENCH_OUT")
+    path = Path(out) if out else tmp_path_factory.mktemp("growth")
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+@pytest.mark.parametrize("n_landmarks", [4, 16])
+def test_marginal_cost_late_against_early(n_landmarks: int, benchmark: Any) -> None:
+    spent, err = _cpu_per_movement(_run(1000, n_landmarks, 1), 1)
+    early = statistics.median(spent[50:100])
+    late = statistics.median(spent[500:1000])
+    ratio = late / early
+    print(
+        f"\n{n_landmarks} landmarks: CPU per movement early (50-99) {1e3 * early:.2f} ms, "
+        f"late (500-999) {1e3 * late:.2f} ms, ratio {ratio:.2f} (goal 1.3); "
+        f"mean error of the final map {err:.4f} FL"
+    )
+    benchmark.extra_info.update(early_ms=1e3 * early, late_ms=1e3 * late, ratio=ratio)
+    benchmark.pedantic(lambda: None, rounds=1, iterations=1)
+    assert ratio <= 1.3
+
+
+class _Recording(JointSlam):
+    """The joint estimator, with every iSAM2 update it makes replayed into a plain iSAM2 right
+    after (the plain one timed apart)."""
+
+    def __init__(self, *args: Any, **kw: Any) -> None:
+        self.plain_s = 0.0
+        self._plain = gtsam.ISAM2()
+        super().__init__(*args, **kw)
+
+    def _new_isam(self) -> gtsam.ISAM2:
+        self._plain = gtsam.ISAM2()
+        return super()._new_isam()
+
+    def _update(
+        self,
+        graph: gtsam.NonlinearFactorGraph,
+        values: gtsam.Values,
+        remove: Any = (),
+    ) -> None:
+        super()._update(graph, values, remove)
+        tick = time.process_time()
+        self._plain.update(graph, values, list(remove))
+        self.plain_s += time.process_time() - tick
+
+
+@pytest.mark.parametrize(("n_landmarks", "n_movements"), [(4, 300), (16, 200)])
+def test_update_against_plain_isam2(n_landmarks: int, n_movements: int, benchmark: Any) -> None:
+    run = _run(n_movements, n_landmarks, 2)
+    slam = _Recording(
+        list(run.landmarks_world),
+        PAPER_REFERENCE,
+        vision_error_rad=EPS,
+        rng=np.random.default_rng(2),
+        distance_prior_rel=DISTANCE_PRIOR_REL,
+    )
+    paper: list[float] = []
+    inner = slam.paper.process_movement
+
+    def timed(obs: MovementObservation) -> Any:
+        tick = time.process_time()
+        out = inner(obs)
+        paper.append(time.process_time() - tick)
+        return out
+
+    slam.paper.process_movement = timed  # type: ignore[method-assign]
+    own, plain = [], []
+    for obs in run.observations:
+        before = slam.plain_s
+        tick = time.process_time()
+        slam.process_movement(obs)
+        total = time.process_time() - tick
+        plain.append(slam.plain_s - before)
+        own.append(total - (slam.plain_s - before) - paper[-1])
+    m_own, m_plain = statistics.median(own[20:]), statistics.median(plain[20:])
+    ratio = m_own / m_plain
+    print(
+        f"\n{n_landmarks} landmarks, {n_movements} movements: estimator update per movement "
+        f"{1e3 * m_own:.2f} ms, plain iSAM2 on the same factors {1e3 * m_plain:.2f} ms, "
+        f"ratio {ratio:.2f} (goal 3); paper filter {1e3 * statistics.median(paper):.2f} ms"
+    )
+    benchmark.extra_info.update(own_ms=1e3 * m_own, plain_ms=1e3 * m_plain, ratio=ratio)
+    benchmark.pedantic(lambda: None, rounds=1, iterations=1)
+    assert ratio <= 3.0
+
+
+WINDOWS = ((50, 100), (200, 300), (500, 1000))
+
+
+def test_growth_law(tmp_path_factory: pytest.TempPathFactory, benchmark: Any) -> None:
+    out = _out_dir(tmp_path_factory)
+    table: dict[str, Any] = {}
+    for n_landmarks in (4, 8, 16, 32):
+        spent, err = _cpu_per_movement(_run(1000, n_landmarks, 3), 3)
+        table[str(n_landmarks)] = {
+            "cpu_ms": [1e3 * s for s in spent],
+            "median_ms": {f"{a}-{b - 1}": 1e3 * statistics.median(spent[a:b]) for a, b in WINDOWS},
+            "mean_error_fl": err,
+        }
+        print(f"\n{n_landmarks} landmarks: {table[str(n_landmarks)]['median_ms']}, error {err:.4f}")
+    (out / "growth.json").write_text(json.dumps(table) + "\n")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.6), dpi=100)
+    for n_landmarks, row in table.items():
+        ms = np.array(row["cpu_ms"])
+        k = 50  # running median over 50 movements
+        smooth = [float(np.median(ms[i : i + k])) for i in range(0, ms.size - k + 1, 10)]
+        ax.plot(np.arange(len(smooth)) * 10 + k / 2, smooth, label=f"{n_landmarks} landmarks")
+    ax.set_xlabel("movement")
+    ax.set_ylabel("CPU per movement (ms, median of 50)")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "growth.png")
+    print(f"written {out / 'growth.json'}, {out / 'growth.png'}")
+    benchmark.pedantic(lambda: None, rounds=1, iterations=1)
