@@ -1,9 +1,12 @@
 """What ``bslam info`` reports about a log, as data (:func:`log_summary`) and as lines.
 
-One checking pass of :class:`data_schemas.mcap.scan.LogScan`: channels and their message counts,
-time range, chunks and their compression, metadata and attachments wherever they lie, the state
-of the file (finished and indexed, finished without an index, unfinished, corrupt) and every
-damaged stretch with its time range and topics.
+A finished, indexed log is summarised from its summary section (statistics, chunk, metadata and
+attachment indexes, and the metadata records they point to): a few reads whatever the log's
+size, no chunk checked. Any other log, or any log with ``check``, by one checking pass of
+:class:`data_schemas.mcap.scan.LogScan`: channels and their message counts, time range, chunks
+and their compression, metadata and attachments wherever they lie, the state of the file
+(finished and indexed, finished without an index, unfinished, corrupt) and every damaged
+stretch with its time range and topics.
 """
 
 from __future__ import annotations
@@ -11,11 +14,14 @@ from __future__ import annotations
 import datetime
 import json
 import os
+import stat
 from dataclasses import dataclass
 
+from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Message, Metadata
 
 from data_schemas.errors import BslamError
+from data_schemas.mcap.processable import indexed_metadata, read_summary
 from data_schemas.mcap.read import corruption
 from data_schemas.mcap.scan import Damage, LogScan
 from data_schemas.registry import SESSION_METADATA_NAME
@@ -71,6 +77,8 @@ class LogSummary:
         Every damaged stretch, in file order (a cut-off end included).
     trailing_bytes : int
         Bytes after the last complete record (an interrupted chunk), 0 if none.
+    checked : bool
+        Every chunk was read and its CRC checked (False: summarised from the summary section).
     """
 
     name: str
@@ -86,6 +94,7 @@ class LogSummary:
     attachments: list[AttachmentSummary]
     damage: list[Damage]
     trailing_bytes: int
+    checked: bool = True
 
     @property
     def finished(self) -> bool:
@@ -100,8 +109,13 @@ class LogSummary:
         return (self.end_ns - self.start_ns) / 1e9
 
 
-def log_summary(source: str | os.PathLike[str]) -> LogSummary:
-    """Summarise a log, finished, unfinished or damaged (one checking pass)."""
+def log_summary(source: str | os.PathLike[str], *, check: bool = False) -> LogSummary:
+    """Summarise a log, finished, unfinished or damaged: from its summary section when it is
+    finished and indexed and not ``check``, else by one checking pass (every CRC)."""
+    if not check:
+        indexed = _from_summary(source)
+        if indexed is not None:
+            return indexed
     with LogScan(source) as scan:
         counts: dict[int, int] = {}
         metadata: dict[str, dict[str, str]] = {}
@@ -157,6 +171,58 @@ def log_summary(source: str | os.PathLike[str]) -> LogSummary:
         )
 
 
+def _from_summary(source: str | os.PathLike[str]) -> LogSummary | None:
+    """The summary of a finished log from its summary section alone (None: the file has no
+    readable summary with statistics, channels and chunk indexes that count every message)."""
+    name = os.fspath(source)
+    try:
+        if not stat.S_ISREG(os.stat(name).st_mode):
+            return None  # a FIFO or a device: the checking pass says what it is
+        with open(name, "rb") as file:
+            summary = read_summary(file)
+            stats = None if summary is None else summary.statistics
+            if summary is None or stats is None or not summary.chunk_indexes:
+                return None
+            counts = stats.channel_message_counts
+            if sum(counts.values()) != stats.message_count or set(counts) - set(summary.channels):
+                return None
+            metadata = indexed_metadata(file, summary)
+    except (OSError, McapError, ValueError, KeyError, UnicodeDecodeError, EOFError):
+        return None  # the checking pass says what is wrong
+    if len(metadata) < len({m.name for m in summary.metadata_indexes}):
+        return None
+    channels = []
+    for channel_id in sorted(summary.channels):
+        channel = summary.channels[channel_id]
+        schema = summary.schemas.get(channel.schema_id)
+        channels.append(
+            ChannelSummary(
+                channel.topic, "" if schema is None else schema.name, counts.get(channel_id, 0)
+            )
+        )
+    attachments = [
+        AttachmentSummary(a.name, a.media_type, a.data_size, a.log_time)
+        for a in summary.attachment_indexes
+    ]
+    empty = stats.message_count == 0
+    return LogSummary(
+        name=name,
+        state="finished",
+        indexed=True,
+        channels=channels,
+        message_count=stats.message_count,
+        chunk_count=len(summary.chunk_indexes),
+        compressions=tuple(sorted({c.compression or "stored" for c in summary.chunk_indexes})),
+        start_ns=None if empty else stats.message_start_time,
+        end_ns=None if empty else stats.message_end_time,
+        metadata=metadata,
+        attachments=attachments,
+        damage=[],
+        trailing_bytes=0,
+        checked=False,
+    )
+
+
 def _when(t_ns: int | None) -> str:
     if t_ns is None:
         return "-"
@@ -164,6 +230,8 @@ def _when(t_ns: int | None) -> str:
 
 
 def _state_line(s: LogSummary) -> str:
+    if s.state == "finished" and not s.checked:
+        return "finished (indexed), from its summary: chunks not checked (--check reads them)"
     if s.state == "finished":
         return "finished (indexed)" if s.indexed else "finished (no index)"
     if s.state == "unfinished":

@@ -109,13 +109,32 @@ def check_channel(name: str, topic_name: str, schema_name: str) -> str | None:
     return None
 
 
-def _summary(file: IO[bytes]) -> Summary | None:
+def read_summary(file: IO[bytes]) -> Summary | None:
     """The summary section, if the file has a readable one (else None: scan the file)."""
     try:
         file.seek(0)
         return make_reader(file).get_summary()
     except (McapError, ValueError, KeyError, UnicodeDecodeError, EOFError, struct.error, OSError):
         return None  # too short for the magic (struct), or for the footer (a seek before 0)
+
+
+def indexed_metadata(file: IO[bytes], summary: Summary) -> dict[str, dict[str, str]]:
+    """The metadata records the summary's metadata indexes point to, name -> key/value map
+    (the first record of each name; the summary is not read again).
+
+    Raises
+    ------
+    McapError, ValueError, KeyError, UnicodeDecodeError, EOFError
+        An index does not point at a readable metadata record.
+    """
+    found: dict[str, dict[str, str]] = {}
+    for metadata_index in summary.metadata_indexes:
+        file.seek(metadata_index.offset)
+        record = next(StreamReader(file, skip_magic=True).records, None)
+        if not isinstance(record, Metadata):
+            raise McapError(f"no metadata record at byte {metadata_index.offset}")
+        found.setdefault(record.name, dict(record.metadata))
+    return found
 
 
 class ProcessableLog(Closing):
@@ -166,7 +185,7 @@ class ProcessableLog(Closing):
         return self._skip
 
     def _open(self, skip_corrupt: bool) -> None:
-        summary = _summary(self._file)
+        summary = read_summary(self._file)
         self._index = self._checked_index(summary)
         schemas: dict[int, Schema]
         channels: dict[int, Channel]
@@ -212,17 +231,10 @@ class ProcessableLog(Closing):
     def _indexed_metadata(self, summary: Summary) -> dict[str, dict[str, str]]:
         """The metadata records the summary's metadata indexes point to (the summary is not
         read again)."""
-        found: dict[str, dict[str, str]] = {}
         try:
-            for metadata_index in summary.metadata_indexes:
-                self._file.seek(metadata_index.offset)
-                record = next(StreamReader(self._file, skip_magic=True).records, None)
-                if not isinstance(record, Metadata):
-                    raise McapError(f"no metadata record at byte {metadata_index.offset}")
-                found.setdefault(record.name, dict(record.metadata))
+            return indexed_metadata(self._file, summary)
         except (McapError, ValueError, KeyError, UnicodeDecodeError, EOFError) as exc:
             raise LogError(f"{self.name}: cannot read the log's metadata ({exc})") from None
-        return found
 
     def _scanned(
         self, skip_corrupt: bool

@@ -7,13 +7,16 @@ import click
 
 @click.command("info")
 @click.argument("log", type=click.Path(dir_okay=False))
-def info(log: str) -> None:
+@click.option("--check", is_flag=True, help="Read every chunk and check its CRC.")
+def info(log: str, check: bool) -> None:
     """Summarise a log: channels, counts, duration, metadata, attachments, damage.
 
-    Every chunk's CRC is checked. An unfinished log (the recording was interrupted) or a
-    corrupt one is summarised as far as it reads, then the command exits 1 and suggests
-    `bslam recover`. A log still being recorded (its recorder holds a lock on it) is
-    summarised as far as it is written, exit 0, with a pointer to `--follow`.
+    A finished, indexed log is summarised from its summary section (a few reads, whatever its
+    size); with --check, and for any other log, every chunk is read and its CRC checked. An
+    unfinished log (the recording was interrupted) or a corrupt one is summarised as far as it
+    reads, then the command exits 1 and suggests `bslam recover`. A log still being recorded
+    (its recorder holds a lock on it) is summarised as far as it is written, exit 0, with a
+    pointer to `--follow`.
     """
     import shlex
 
@@ -23,7 +26,7 @@ def info(log: str) -> None:
     from data_schemas.outputs import being_written
 
     recording = being_written(log)  # the recorder's lock: before the scan reads the file
-    s = log_summary(log)
+    s = log_summary(log, check=check)
     lines = summary_lines(s)
     if recording and s.state != "finished":
         lines[0] = f"{s.name}: being recorded (unfinished until the recorder ends)"

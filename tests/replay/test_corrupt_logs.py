@@ -30,6 +30,8 @@ def test_corrupt_log_is_refused_in_one_line(small_log: Path, tmp_path: Path, com
     args = [command, str(broken)]
     if command == "replay":
         args += ["--save", str(tmp_path / "out.rrd")]
+    if command == "info":
+        args += ["--check"]
     result = CliRunner().invoke(cli, args)
     assert result.exit_code == 1, result.output
     last = result.output.strip().splitlines()[-1]

@@ -419,7 +419,7 @@ def test_every_command_counts_salvage_the_same(small_log: Path, tmp_path: Path) 
     total = summary.statistics.message_count  # one chunk in this log: all its messages
     runner = CliRunner()
     said = [
-        runner.invoke(cli, ["info", str(broken)]).output,
+        runner.invoke(cli, ["info", "--check", str(broken)]).output,
         runner.invoke(cli, ["process", str(broken)]).output,
         runner.invoke(cli, ["recover", str(broken), str(tmp_path / "r.mcap")]).output,
     ]

@@ -38,17 +38,20 @@ def _finished_log(path: Path, frames: int = 30) -> None:
             clock.sleep(0.01)
 
 
-def test_summary_of_finished_log(tmp_path: Path) -> None:
+@pytest.mark.parametrize("check", [False, True])
+def test_summary_of_finished_log(tmp_path: Path, check: bool) -> None:
+    # from the summary section, or by reading every chunk: the same figures
     path = tmp_path / "a.mcap"
     _finished_log(path, frames=10)
-    s = log_summary(path)
-    assert s.finished and s.trailing_bytes == 0
+    s = log_summary(path, check=check)
+    assert s.finished and s.trailing_bytes == 0 and s.indexed and s.checked == check
     assert [(c.topic, c.schema, c.count) for c in s.channels] == [
         ("/camera/panorama", "foxglove.CompressedImage", 10),
         ("/robot/odometry", "bslam.Odometry", 10),
     ]
     assert s.message_count == 20
     assert s.duration_s == pytest.approx(19 * 0.01)
+    assert s.chunk_count >= 1 and s.compressions == ("stored",)
     assert SESSION_METADATA_NAME in s.metadata
 
 
@@ -104,8 +107,10 @@ def test_corrupt_chunk_is_refused_then_read_around(tmp_path: Path) -> None:
     # the flipped byte (10 bytes before the chunk's end) lies in its last message's JSON, where
     # a byte >= 0x80 is not UTF-8: that message is dropped, every other one kept
     assert n == sum(summary.statistics.channel_message_counts.values()) - 1  # type: ignore[union-attr]
-    s = log_summary(broken)
-    assert s.state == "corrupt" and not s.finished
+    fast = log_summary(broken)  # from the summary section: the chunks are not read
+    assert fast.finished and not fast.checked and fast.message_count == n + 1
+    s = log_summary(broken, check=True)
+    assert s.state == "corrupt" and not s.finished and s.checked
     [damage] = s.damage
     assert damage.dropped == 1 and "1 more dropped" in damage.describe()
     assert (damage.start_ns, damage.end_ns) == (

@@ -177,7 +177,7 @@ def test_one_flipped_byte_anywhere(finished: Path, tmp_path: Path) -> None:
         damaged = bytearray(data)
         damaged[offset] ^= int(rng.integers(1, 256))
         broken.write_bytes(bytes(damaged))
-        s = log_summary(broken)  # no traceback, no hang
+        s = log_summary(broken, check=True)  # no traceback, no hang
         if offset >= first_chunk:  # header and metadata strings carry no CRC
             assert s.damage and not s.finished, offset
         report = recover_log(broken, fixed, force=True)
@@ -256,5 +256,5 @@ def test_processable_log_refuses_or_skips_a_corrupt_chunk(
         )
         kept = [(m.topic, m.log_time_ns, m.data) for m in log.messages()]
     assert inside and kept == [m for m in everything if m not in inside]
-    s = log_summary(broken)
+    s = log_summary(broken, check=True)
     assert s.state == "corrupt" and [d.start for d in s.damage] == [chunk.chunk_start_offset]
