@@ -257,11 +257,26 @@ class LogIndex:
                     left[chunk_at] -= 1
                     if not left[chunk_at]:
                         del loaded[chunk_at]
+                        self._release(chunk_at)
                     if message is not None:
                         yield message
             finally:
                 for future in pending.values():
                     future.cancel()
+
+    def _release(self, chunk_at: int) -> None:
+        """Give the pages of a chunk whose messages are all read back to the system (the mapped
+        file would otherwise count whole in the process's memory by the end of a pass; a page
+        read again comes back from the file)."""
+        mapping = self._mapping
+        if mapping is None or not hasattr(mmap, "MADV_DONTNEED"):
+            return
+        chunk = self._chunks[chunk_at]
+        start = chunk.chunk_start_offset - chunk.chunk_start_offset % mmap.PAGESIZE
+        end = min(chunk.chunk_start_offset + chunk.chunk_length, len(mapping))
+        if end > start:
+            with contextlib.suppress(OSError, ValueError):
+                mapping.madvise(mmap.MADV_DONTNEED, start, end - start)
 
     # ------------------------------------------------------------------ loading chunks
     def _load(self, chunk_at: int) -> _Loaded:

@@ -25,6 +25,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -46,15 +47,12 @@ with ProcessableLog(sys.argv[1]) as log:
 
 def _measure(args: list[str]) -> tuple[float, float]:
     """CPU seconds (user + system) and peak RSS (MiB) of one whole process."""
-    proc = subprocess.Popen(
-        args, env=ENV, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
-    )
-    _, status, usage = os.wait4(proc.pid, 0)
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    err = proc.stderr.read().decode() if proc.stderr else ""
-    if proc.stderr:
-        proc.stderr.close()
-    assert proc.returncode == 0, (args, err[-2000:])
+    with tempfile.TemporaryFile() as err:  # a pipe could fill up and stall the command
+        proc = subprocess.Popen(args, env=ENV, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, usage = os.wait4(proc.pid, 0)
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        err.seek(0)
+        assert proc.returncode == 0, (args, err.read().decode()[-2000:])
     return usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024
 
 
@@ -100,7 +98,7 @@ def test_process_against_decoding_every_frame(cache: Path, benchmark: Any) -> No
     log = _log(cache, 1000, "png")
     got = _alternated(
         3,
-        process=[*BSLAM, "process", str(log), "--summary", str(cache / "summary_1000.json")],
+        process=[*BSLAM, "process", str(log), "--summary", str(cache / "s_1000.json"), "--force"],
         decode=[sys.executable, "-c", DECODE_EVERY_FRAME, str(log)],
     )
     (cpu, rss), (floor, floor_rss) = got["process"], got["decode"]
