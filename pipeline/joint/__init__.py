@@ -1,7 +1,8 @@
 """The joint estimator: every bearing in one GTSAM factor graph, initialized by the paper's filter.
 
 Modules: ``geometry`` (resection, ray intersection), ``graph`` (GTSAM keys and factors),
-``noise`` (bearing noise from residuals), ``result`` (per-movement result), ``estimator``
+``noise`` (bearing noise from residuals), ``table`` (the map's bearings as arrays, for its
+residuals), ``result`` (per-movement result), ``estimator``
 (:class:`JointSlam`). ``JointSlam`` is loaded on first use: ``gtsam`` costs ~0.3 s to import,
 and reading a result needs none of it.
 """
