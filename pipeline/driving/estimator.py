@@ -411,6 +411,9 @@ class DrivingSlam:
             if len(agree) < o.min_rays:
                 return f"{len(agree)} of {len(earlier)} rays agree with the two views' point"
             point = _least_squares_point(point, [sensors[i] for i in agree])
+            reach = min(float(np.hypot(*(point - sd[0][:2]))) for sd in sensors)
+            if not reach <= o.r_max_m:  # nearly parallel rays: no point to trust
+                return f"the rays meet farther than r_max = {o.r_max_m:g} m"
         agree = [i for i, sd in enumerate(sensors) if _ray_error(point, *sd) <= 2 * self.eps_rad]
         if len(agree) < o.min_rays:
             return f"{len(agree)} of {len(earlier)} rays agree with the rays' point"

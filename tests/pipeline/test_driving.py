@@ -256,3 +256,25 @@ def test_driving_maps_within_1_2_of_the_batch_optimum(
     err, best, mapped, total = drive(arena, seed, duration_s)
     assert mapped >= total - spare
     assert err <= 1.2 * best, (err, best)
+
+
+def test_landmark_enters_once_its_rays_cross_at_15_degrees() -> None:
+    # driving along +x, landmark C at (2, 2): the ray from (x, 0) points at atan2(2, 2 - x);
+    # 15 deg more than from (0, 0) (45 deg) once x >= 2 - 2 / tan(60 deg) = 0.845 m, so the
+    # keyframe at 0.9 m (every 0.3 m) brings it in, from 4 rays that meet exactly at (2, 2)
+    slam = DrivingSlam(
+        ["A", "B", "C"],
+        ("A", "B"),
+        vision_error_rad=math.radians(2.0),
+        rng=np.random.default_rng(0),
+    )
+    entered = {}
+    for i in range(41):
+        x = 0.05 * i
+        t = 1_000_000 * i
+        slam.bearings(t, {"C": math.atan2(2.0, 2.0 - x)})
+        for r in slam.odometry(t, np.array([x, 0.0, 0.0])):
+            entered.update({n: (r.index, p) for n, p in r.entered.items()})
+    index, point = entered["C"]
+    assert index == 3  # keyframes at 0, 0.3, 0.6, 0.9 m
+    assert point == pytest.approx([2.0, 2.0], abs=1e-6)
