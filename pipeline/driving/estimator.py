@@ -74,6 +74,8 @@ class DrivingOptions:
         Rays kept per landmark not yet mapped (the oldest go first).
     relinearize_threshold : float
         iSAM2's relinearization threshold.
+    dogleg : bool
+        Powell's dogleg steps in iSAM2 (else Gauss-Newton).
     """
 
     keyframes: KeyframeRule = field(default_factory=KeyframeRule)
@@ -87,6 +89,7 @@ class DrivingOptions:
     min_rays: int = 3
     max_rays: int = 40
     relinearize_threshold: float = 0.01
+    dogleg: bool = True
 
 
 @dataclass(frozen=True)
@@ -214,6 +217,8 @@ class DrivingSlam:
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(self.options.relinearize_threshold)
         params.relinearizeSkip = 1
+        if self.options.dogleg:
+            params.setOptimizationParams(gtsam.ISAM2DoglegParams())
         self.isam = gtsam.ISAM2(params)
         self.selector = KeyframeSelector(self.options.keyframes)
         #: every factor given to iSAM2, for a batch solve of the same problem

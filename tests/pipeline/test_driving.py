@@ -261,7 +261,8 @@ def test_driving_maps_within_1_2_of_the_batch_optimum(
 def test_landmark_enters_once_its_rays_cross_at_15_degrees() -> None:
     # driving along +x, landmark C at (2, 2): the ray from (x, 0) points at atan2(2, 2 - x);
     # 15 deg more than from (0, 0) (45 deg) once x >= 2 - 2 / tan(60 deg) = 0.845 m, so the
-    # keyframe at 0.9 m (every 0.3 m) brings it in, from 4 rays that meet exactly at (2, 2)
+    # keyframe at 0.9 m (every 0.3 m; at 0.6 m: 10.0 deg) brings it in, from 4 rays that meet
+    # exactly at (2, 2)
     slam = DrivingSlam(
         ["A", "B", "C"],
         ("A", "B"),
