@@ -9,14 +9,19 @@ ellipse per landmark, FL). ``gtsam`` is imported only when the joint estimator i
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Literal, Protocol
+from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 from data_schemas.errors import EstimationError
 from pipeline.estimate import LandmarkEstimate
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
+
+if TYPE_CHECKING:
+    from pipeline.joint.geometry import KeyframePose
+    from pipeline.joint.noise import NoiseEstimate
 
 EstimatorName = Literal["joint", "paper"]
 #: Estimator names (the default first, as ``replay.defaults.ESTIMATORS``).
@@ -35,6 +40,55 @@ class Estimator(Protocol):
 
     def forget(self, name: str) -> None:
         """Drop landmark ``name`` and what it was given so far (its name was found wrong)."""
+
+
+class AssociatingEstimator(Estimator, Protocol):
+    """What association of landmarks that look alike needs from the estimator besides
+    (:class:`pipeline.association.alike.AlikeLandmarks`): the joint estimator has it."""
+
+    @property
+    def noise(self) -> NoiseEstimate | None:
+        """Bearing noise estimated from the map's residuals (None: not yet)."""
+
+    @property
+    def used_movements(self) -> list[int]:
+        """Indices of the movements in the map, in order."""
+
+    @property
+    def trajectory_fl(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Per movement of :attr:`used_movements`, O1 and O2 as (1, 2) arrays in FL."""
+
+    @property
+    def bearing_scatter(self) -> dict[str, tuple[int, float]]:
+        """Per landmark: its bearings in the map and their scatter over the map's noise."""
+
+    def keyframe_poses(self) -> dict[tuple[int, int], KeyframePose]:
+        """Every keyframe in the map, ``(movement, end)``, with its pose and covariance (FL)."""
+
+    def add_history(self, name: str, bearings: Sequence[tuple[int, int, float]]) -> None:
+        """Bearings ``(movement, end, bearing_rad)`` of ``name`` known only once it is named."""
+
+    def settle(self) -> list[str]:
+        """Enter the landmarks whose bearings wait and update the map; their names."""
+
+
+def associating(estimator: Estimator) -> AssociatingEstimator:
+    """``estimator`` as association drives it: the joint estimator.
+
+    Raises
+    ------
+    EstimationError
+        ``estimator`` is another (the paper's filter cannot take a landmark's bearings from
+        before it was named).
+    """
+    from pipeline.joint.estimator import JointSlam
+
+    if not isinstance(estimator, JointSlam):
+        raise EstimationError(
+            "landmarks that look alike are associated with the joint estimator only; "
+            "use --estimator joint"
+        )
+    return estimator
 
 
 def make_estimator(

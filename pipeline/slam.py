@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum, unique
 from functools import partial
 from typing import Literal
 
@@ -45,6 +46,34 @@ Fusion = Literal["likelihood", "product"]
 
 #: Default FR particles per reference landmark for the frame marginalisation.
 N_FRAME_POOL = 1024
+
+
+@unique
+class MovementStatus(StrEnum):
+    """The kind of a movement's status: used (``"ok"``), or skipped with its reason
+    (``"skipped: <reason>"``, :func:`skipped`)."""
+
+    OK = "ok"
+    SKIPPED = "skipped"
+
+
+def skipped(reason: str) -> str:
+    """The status of a movement skipped for ``reason``: ``"skipped: <reason>"``."""
+    return f"{MovementStatus.SKIPPED}: {reason}"
+
+
+@unique
+class Placement(StrEnum):
+    """How a movement's keyframes entered the map (the summary's ``placement``)."""
+
+    #: not in the map, or placed by the paper's filter (which says nothing)
+    NONE = ""
+    #: from the reference pair's bearings (the paper's filter could use the movement too)
+    REFERENCE_PAIR = "reference pair"
+    #: against the landmarks already in the map (joint estimator)
+    RESECTION = "resection"
+    #: from wheel odometry (the driving estimator's keyframes)
+    ODOMETRY = "odometry"
 
 
 @dataclass(frozen=True)
@@ -279,13 +308,13 @@ class BearingSlam:
         A movement whose reference landmarks are missing or degenerate gets status
         ``"skipped: <reason>"`` and leaves the state unchanged.
         """
-        res = MovementResult(obs.index, "ok")
+        res = MovementResult(obs.index, MovementStatus.OK)
         regions: dict[str, ConeIntersection] = {}
         sets_fr = self._initialize(obs, res, regions)
         res.particles_fr = sets_fr
         for ref in self.reference:
             if ref not in sets_fr:
-                res.status = f"skipped: reference landmark {ref!r}: {res.skipped_landmarks[ref]}"
+                res.status = skipped(f"reference landmark {ref!r}: {res.skipped_landmarks[ref]}")
                 res.belief_fl = dict(self._belief)
                 res.estimates = self.estimates
                 return res

@@ -35,6 +35,7 @@ from data_schemas.stamps import ns_from_stamp
 from pipeline.bearings import Detection
 from pipeline.driving.estimator import DrivingOptions, DrivingSlam, KeyframeResult
 from pipeline.driving.odometry import compose
+from pipeline.slam import MovementStatus, Placement
 from replay.plan import MovementPlan
 from replay.records import FrameRecord, MethodConfig, MovementRecord, RunInfo, Sink
 from replay.stages import MessageLog, estimate_records
@@ -192,7 +193,7 @@ class DrivingRunner:
             index=r.index,
             timestamp_ns=r.t_ns,
             log_time_ns=log_time_ns,
-            status="ok",
+            status=MovementStatus.OK,
             bearings_rad={n: (ray.bearing_rad, None) for n, ray in r.rays.items()},
             skipped_landmarks=dict(r.waiting),
             o1_fl=None if ends is None else ends[:1],
@@ -200,7 +201,7 @@ class DrivingRunner:
             estimates=estimate_records(self.slam.estimates()),
             truth_o1_world=self.truth.true_position(r.t_ns),
             truth_o2_world=self.truth.true_position(self.slam.keyframe_times_ns[-1]),
-            placement="odometry",
+            placement=Placement.ODOMETRY,
             map_unit_m=self.slam.unit_m,
             rays_fl=rays_fl,
         )

@@ -13,6 +13,7 @@ from typing import Any
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.window import LogWindow, WindowedLog, WindowError
 from data_schemas.outputs import OutputGuard
+from pipeline.slam import MovementStatus, Placement
 from replay.records import MethodConfig, Sink
 from replay.sinks.summary import SummarySink
 from replay.stages import MessageLog, run_log
@@ -132,8 +133,8 @@ def windowed(log: MessageLog, window: LogWindow) -> WindowedLog:
 def result_line(doc: dict[str, Any]) -> str:
     """One line about a processed log: movements used, landmarks mapped, error if known."""
     moves = doc["movements"]
-    used = sum(1 for m in moves if m["status"] == "ok")
-    resected = sum(1 for m in moves if m.get("placement") == "resection")
+    used = sum(1 for m in moves if m["status"] == MovementStatus.OK)
+    resected = sum(1 for m in moves if m.get("placement") == Placement.RESECTION)
     text = f"{used}/{len(moves)} movements used"
     if resected:
         text += f" ({resected} placed by resection)"

@@ -21,6 +21,7 @@ from pipeline.association.final import STATUSES, FinalDetection
 from pipeline.bearings import Detection
 from pipeline.estimators import ESTIMATORS
 from pipeline.priors import PriorName
+from pipeline.slam import MovementStatus, Placement
 from replay import defaults
 from replay.truth import Truth
 
@@ -191,9 +192,9 @@ class MovementRecord:
         The map after this movement.
     truth_o1_world, truth_o2_world : (2,) or None
         Simulated logs: the true keyframe positions (m, world).
-    placement : str
-        Joint estimator: ``"reference pair"`` or ``"resection"`` for a movement in the map,
-        empty otherwise (and always for the paper's filter).
+    placement : Placement
+        Joint estimator: ``REFERENCE_PAIR`` or ``RESECTION`` for a movement in the map; the
+        driving estimator: ``ODOMETRY``; ``NONE`` otherwise (and always for the paper's filter).
     residuals_rad : dict name -> (at O1, at O2)
         Joint estimator: this movement's bearing residuals under the map after it.
     bearing_noise_rad : float or None
@@ -245,7 +246,7 @@ class MovementRecord:
     estimates: Mapping[str, EstimateRecord] = field(default_factory=dict)
     truth_o1_world: NDArray[np.float64] | None = None
     truth_o2_world: NDArray[np.float64] | None = None
-    placement: str = ""
+    placement: Placement = Placement.NONE
     residuals_rad: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     bearing_noise_rad: float | None = None
     divergence: str = ""
@@ -262,7 +263,7 @@ class MovementRecord:
     @property
     def ok(self) -> bool:
         """True if the movement updated the map."""
-        return self.status == "ok"
+        return self.status == MovementStatus.OK
 
 
 @dataclass(frozen=True)

@@ -12,9 +12,9 @@ geometry) is skipped with its reason and processing goes on; the reason is in th
 record (so in the summary) and is logged as a warning on the ``bslam.replay`` logger, which
 prints nothing unless the application configures it (the CLI does for one log). Landmarks of a
 class that several catalog landmarks share get no bearing from the extractor (it never guesses
-which blob is which); :mod:`replay.alike` associates the blobs with the map and names the
-landmarks ``red#1``, ``red#2``, ...; what it cannot resolve is in each movement's record, with a
-warning.
+which blob is which); :mod:`pipeline.association.alike` associates the blobs with the map and
+names the landmarks ``red#1``, ``red#2``, ...; what it cannot resolve is in each movement's
+record, with a warning.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from data_schemas.mcap.read import LogMessage
 from data_schemas.registry import BEARINGS_TOPIC, CAMERA_TOPIC, IMAGE_SCHEMA, image_encoding
 from data_schemas.session import Session, shared_classes, shared_reference_problem
 from data_schemas.stamps import ns_from_stamp
+from pipeline.association.alike import AlikeLandmarks
 from pipeline.bearings import (
     BearingExtractor,
     Detection,
@@ -44,8 +45,8 @@ from pipeline.bearings import (
     make_extractor,
 )
 from pipeline.estimate import LandmarkEstimate
-from pipeline.slam import MovementObservation, MovementResult
-from replay.alike import AlikeLandmarks
+from pipeline.estimators import associating
+from pipeline.slam import MovementObservation, MovementResult, MovementStatus, skipped
 from replay.estimation import estimator_for, joint_fields
 from replay.plan import PLAN_TOPICS, MovementPlan
 from replay.records import (
@@ -234,9 +235,9 @@ class Runner:
 
     def _associate_final(self) -> None:
         """Landmarks that look alike: every keyframe's detections with the final map."""
-        final = None if self.alike is None else self.alike.final(self.slam)
-        if final is None:
+        if self.alike is None:
             return
+        final = self.alike.final(associating(self.slam))
         changed = final.retracted or final.named_at_end
         estimates = estimate_records(self.slam.estimates) if changed else None
         record = AssociationRecord(
@@ -387,7 +388,7 @@ class Runner:
                 for p in missing
             )
             record = MovementRecord(
-                index, t_ns, log_time_ns, f"skipped: {why}", bearings, ambiguous_landmarks=ambiguous
+                index, t_ns, log_time_ns, skipped(why), bearings, ambiguous_landmarks=ambiguous
             )
         else:
             assert start is not None and end is not None
@@ -400,13 +401,16 @@ class Runner:
             )
             assoc = None
             if self.alike is not None:
-                named, assoc = self.alike.observe(
-                    index, (start.detections, end.detections), obs.turn_rad, self.slam
+                obs, assoc = self.alike.observe(
+                    index,
+                    (start.detections, end.detections),
+                    obs.turn_rad,
+                    obs.distance_m,
+                    self.slam,
                 )
-                obs = replace(named, distance_m=obs.distance_m)
             result = self.slam.process_movement(obs)
             if self.alike is not None and assoc is not None:
-                self.alike.after(assoc, result, self.slam)
+                self.alike.after(assoc, result, associating(self.slam))
                 bearings = {n: b for n, b in bearings.items() if n not in self.alike.alike}
                 for name in self.alike.associator.names:
                     pair = (assoc.bearings_o1_rad.get(name), assoc.bearings_o2_rad.get(name))
@@ -446,7 +450,7 @@ class Runner:
         start: _Keyframe,
         end: _Keyframe,
     ) -> MovementRecord:
-        ok = result.status == "ok"
+        ok = result.status == MovementStatus.OK
         return MovementRecord(
             index=result.index,
             timestamp_ns=t_ns,

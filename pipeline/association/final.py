@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from enum import StrEnum, unique
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,19 +37,12 @@ from pipeline.joint.geometry import KeyframePose
 #: (chi-square units: the best assignment at least e^1.5, about 4.5, times as likely as any
 #: other). Looser than the 9 of association movement by movement
 #: (:data:`pipeline.association.assign.MARGIN_CHI2`), where a wrong pairing goes into the map
-#: and the hypotheses; here it only labels a detection. Chosen on simulated seeds 161-540 (760
-#: runs): with 4, 3 and 2, 97.9, 98.1 and 98.4 % of the detections named right, 99.83 % of
-#: the named right with each (seeds 541-580, simulated after: 96.3, 96.6 and 96.9 %, 99.46 %
-#: of the named right); on the random keyframes of tests/pipeline/test_association_final.py,
-#: whose blobs may be 1.5 degrees apart, 2 lets the named fall to 99.4 % right, 3 and 4 keep
-#: 99.8 %.
+#: and the hypotheses; here it only labels a detection.
 FINAL_MARGIN_CHI2 = 3.0
 
 #: With every name of a class given, this many of its detections that no named landmark
 #: explains with the final map are reported: a landmark of the class may be missing from the map
-#: and one of the names may stand where rays of several landmarks meet (chosen on simulated
-#: seeds 161-420: 3 or more in each of the 17 runs with 8 names of which one was more than
-#: 10 cm off its landmark, and in 17 of the 465 runs whose 8 names were right).
+#: and one of the names may stand where rays of several landmarks meet.
 MISSING_UNEXPLAINED = 3
 #: ... and where their rays meet is said when rays of this many keyframes pass within eps of it.
 MISSING_KEYFRAMES = 4
@@ -59,12 +52,25 @@ MISSING_KEYFRAMES = 4
 #: unexplained, 32 landmarks of which 17-19 named).
 MEETING_CROSSINGS = 5000
 
-#: What became of one detection: given a name; one blob where several named landmarks line up
-#: (predicted within eps of each other, none clearly in front, no other blob near: it is one
-#: or several of them); contested by several named landmarks; explained by none; or at a
-#: keyframe the map does not hold.
-Status = Literal["named", "in line", "contested", "unexplained", "not placed"]
-STATUSES: tuple[Status, ...] = ("named", "in line", "contested", "unexplained", "not placed")
+
+@unique
+class Status(StrEnum):
+    """What became of one detection with the final map (the summary's keys)."""
+
+    #: given a name
+    NAMED = "named"
+    #: one blob where several named landmarks line up (predicted within eps of each other, none
+    #: clearly in front, no other blob near: it is one or several of them)
+    IN_LINE = "in line"
+    #: contested by several named landmarks
+    CONTESTED = "contested"
+    #: explained by none
+    UNEXPLAINED = "unexplained"
+    #: at a keyframe the map does not hold
+    NOT_PLACED = "not placed"
+
+
+STATUSES: tuple[Status, ...] = tuple(Status)
 
 
 @dataclass(frozen=True)
@@ -131,17 +137,19 @@ def associate_final(
         for label, bearings in detections[key].items():
             det = np.asarray(bearings, np.float64).reshape(-1)
             names = [name for name, _ in known.get(label, ())]
-            status: list[Status] = ["not placed" if pose is None else "unexplained"] * det.size
+            status: list[Status] = [
+                Status.NOT_PLACED if pose is None else Status.UNEXPLAINED
+            ] * det.size
             given: list[str | None] = [None] * det.size
             lined: list[tuple[str, ...]] = [()] * det.size
             if pose is not None and names and det.size:
                 pairs, contested, in_line = _assign(pose, det, known[label], noise_rad, eps_rad)
                 for i, j in pairs:
-                    given[j], status[j] = names[i], "named"
+                    given[j], status[j] = names[i], Status.NAMED
                 for j in contested:
-                    status[j] = "contested"
+                    status[j] = Status.CONTESTED
                 for j, lms in in_line.items():
-                    status[j], lined[j] = "in line", tuple(names[i] for i in lms)
+                    status[j], lined[j] = Status.IN_LINE, tuple(names[i] for i in lms)
             out.extend(
                 FinalDetection(movement, end, label, float(b), n, s, o)
                 for b, n, s, o in zip(det, given, status, lined, strict=True)
@@ -216,7 +224,7 @@ def missing_reports(
     """
     out = {}
     for label in full:
-        left = [d for d in detections if d.label == label and d.status == "unexplained"]
+        left = [d for d in detections if d.label == label and d.status == Status.UNEXPLAINED]
         if len(left) < MISSING_UNEXPLAINED:
             continue
         keyframes = len({(d.movement, d.end) for d in left})
@@ -247,7 +255,7 @@ def unexplained_rays(
         d
         for d in detections
         if d.label == label
-        and (d.status == "unexplained" or (d.name is not None and d.name in names))
+        and (d.status == Status.UNEXPLAINED or (d.name is not None and d.name in names))
     ]
     return [
         Ray.placed(d.movement, d.end, k, d.bearing_rad, p.origin_fl, p.heading_rad)

@@ -9,14 +9,12 @@ where no landmark stands mostly is not (its predictions meet no blob, or a blob 
 landmark explains as well); and when it is seen, it is in turn by landmarks that line up with
 it, whose bearings in the map scatter about it more widely than a real landmark's do.
 :class:`Support` counts each prediction's outcome and keeps the estimator's scatter;
-:meth:`Support.doubt` says when the name is doubtful. Measured on simulated runs of 8
-identical landmarks (docs/RESULTS.md): names more than 10 cm off any landmark were seen at 0-35
-% of their predictions, correct names mostly at 80-100 %; the wrong names seen more often were
-mostly missed (no detection of their class in their gate) at a fifth of their predictions or
-more, which 0.6 % of the correct names were. A name found by the search among unnamed
-detections (from rays the hypotheses kept disputing) is weaker evidence: seen at half its
-predictions or fewer and contested at 35 % of them or more, its blobs are as often another
-landmark's, and it is doubtful too. A name seen at too few keyframes
+:meth:`Support.doubt` says when the name is doubtful: seen at too small a share of its
+predictions, never seen, or missed (no detection of its class in its gate) too often. A name
+found by the search among unnamed detections (from rays the hypotheses kept disputing) is
+weaker evidence: seen at half its predictions or fewer and contested at 35 % of them or
+more, it is doubtful too. A name whose bearings scatter too widely is doubtful. How the
+thresholds were chosen is in docs/method.md. A name seen at too few keyframes
 since its naming for either to show is unconfirmed (:meth:`Support.unconfirmed`): reported, as
 the name has not yet been put to the test.
 """
@@ -46,17 +44,13 @@ DOUBT_MISSED_SHARE = 0.2
 #: is also doubtful once predicted at DOUBT_MIN_PREDICTIONS keyframes, seen at no more than this
 #: share of them...
 DOUBT_SEARCHED_SEEN_SHARE = 0.5
-#: ... and contested at this share or more: its blobs are as often another landmark's. Measured
-#: at the end of 520 simulated runs of 8 identical landmarks (docs/RESULTS.md): of the names the
-#: search found, 15 of the 19 more than 10 cm off end doubtful (the other 4 unconfirmed), and
-#: 125 of the 1,996 right ones; without this rule 5 of 13 and 35 of 1,847 were.
+#: ... and contested at this share or more: its blobs are as often another landmark's.
 DOUBT_SEARCHED_CONTESTED_SHARE = 0.35
 #: A name is also doubtful when it has this many bearings in the map...
 DOUBT_SCATTER_BEARINGS = 10
 #: ... and they scatter about it this many times as widely as the map's bearings do (robust
 #: scales; :attr:`pipeline.joint.JointSlam.bearing_scatter`): rays of several landmarks meet
-#: only roughly. Measured at the end of 440 simulated runs of 8 identical landmarks
-#: (docs/RESULTS.md): 17 of the 26 names more than 10 cm off scatter more, 5 of 3,441 correct ones.
+#: only roughly.
 DOUBT_SCATTER = 1.7
 #: A name not doubtful is confirmed once seen at this many keyframes since it was named (two
 #: movements' worth, beyond the lines of sight or the keyframes that named it).

@@ -127,9 +127,7 @@ DISCOVER_FAN_SEEN_SHARE = 0.9
 #: one, then the REBUILD_SUSPECTS, the final map does not hold or, after those, gives a
 #: detection at the smallest share of their predictions) are given anew where their detections
 #: and those the final map left unexplained meet, when those points explain REBUILD_GAIN
-#: detections more than the names do. Measured on 960 simulated runs of 8 identical landmarks
-#: (docs/RESULTS.md): 13 runs with a name 10-101 cm off or a landmark unnamed end with all 8
-#: named within 10 cm, none changed for the worse.
+#: detections more than the names do.
 REBUILD_SUSPECTS = 2
 REBUILD_GAIN = 8
 #: A hypothesis sharing a ray with another is confirmed only when seen along this many more

@@ -45,7 +45,7 @@ from pipeline.joint.noise import NoiseEstimate, estimate_noise, robust_std
 from pipeline.joint.result import JointMovementResult
 from pipeline.joint.table import BearingTable, by_landmark
 from pipeline.priors import PriorName
-from pipeline.slam import BearingSlam, MovementObservation
+from pipeline.slam import BearingSlam, MovementObservation, MovementStatus, Placement, skipped
 from pipeline.triangulate import triangulate_fr
 
 #: Smallest angle between two rays of a landmark for it to enter the graph by intersection, in
@@ -975,7 +975,7 @@ class JointSlam:
         p = self.paper.process_movement(self._initializing(obs, mapped))
         res = JointMovementResult(
             obs.index,
-            "ok",
+            MovementStatus.OK,
             fused=list(p.fused),
             defensive=list(p.defensive),
             cones_fr=p.cones_fr,
@@ -1017,11 +1017,13 @@ class JointSlam:
             placed += self._place_waiting()
         if obs.index not in self._placed:
             reason = why or self._place(m)
-            res.status = "skipped: " + (reason if isinstance(reason, str) else "not placed")
+            res.status = skipped(reason if isinstance(reason, str) else "not placed")
         if not placed:
             res.estimates, res.noise = self.estimates, self.noise
             return res
-        res.placement = "reference pair" if p.status == "ok" else "resection"
+        res.placement = (
+            Placement.REFERENCE_PAIR if p.status == MovementStatus.OK else Placement.RESECTION
+        )
         res.also_placed = [k for k in placed if k != obs.index]
         divergence = self._check(before)
         if divergence:
@@ -1041,7 +1043,7 @@ class JointSlam:
             res.o1_fl, res.o2_fl = mp.o1_fl[None, :], mp.o2_fl[None, :]
             res.residuals_rad = self._movement_residuals(m)
         else:
-            res.placement = ""
+            res.placement = Placement.NONE
         return res
 
     def _snapshot(self) -> _Snapshot:
@@ -1081,11 +1083,11 @@ class JointSlam:
         else:
             self._waiting[m.index] = m
             self._isam, self._values = self._new_isam(), gtsam.Values()
-        res.status = (
-            f"skipped: the map diverged with it ({divergence}) and re-initialization from the "
+        res.status = skipped(
+            f"the map diverged with it ({divergence}) and re-initialization from the "
             f"particles did not fit ({still}); the map is kept as before it"
         )
-        res.placement, res.also_placed = "", []
+        res.placement, res.also_placed = Placement.NONE, []
         res.estimates, res.noise = self.estimates, self.noise
         return res
 

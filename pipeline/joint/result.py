@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from pipeline.joint.noise import NoiseEstimate
-from pipeline.slam import MovementResult
+from pipeline.slam import MovementResult, Placement
 
 
 @dataclass
@@ -17,9 +17,9 @@ class JointMovementResult(MovementResult):
 
     Attributes
     ----------
-    placement : str
-        ``"reference pair"`` (the paper could use the movement too), ``"resection"`` (placed
-        against the landmarks in the map) or ``""`` (skipped).
+    placement : Placement
+        ``REFERENCE_PAIR`` (the paper could use the movement too), ``RESECTION`` (placed
+        against the landmarks in the map) or ``NONE`` (skipped).
     also_placed : list of int
         Earlier movements that waited (not placeable then) and entered the map with this one.
     residuals_rad : dict name -> (at O1, at O2)
@@ -33,7 +33,7 @@ class JointMovementResult(MovementResult):
         the distance prior, or before a movement with a distance is in the map).
     """
 
-    placement: str = ""
+    placement: Placement = Placement.NONE
     also_placed: list[int] = field(default_factory=list)
     residuals_rad: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
     noise: NoiseEstimate | None = None

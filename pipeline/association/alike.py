@@ -1,12 +1,12 @@
-"""Landmarks that look alike in the stages: the runner's side of :mod:`pipeline.association`.
+"""Landmarks that look alike, movement by movement: association and its loop with the estimator.
 
-:class:`AlikeLandmarks` turns a movement's keyframe detections into what the associator takes
-(bearings of landmarks with a class of their own, blobs per shared class), gives the estimator
-the named landmarks' bearings, and after the estimator has placed the movement lets the
-associator grow its hypotheses, makes the estimator forget the landmarks whose names were
-taken back, and hands it the earlier bearings of landmarks named now
-(:meth:`pipeline.joint.JointSlam.add_history`). Once the log is processed, :meth:`final`
-associates every keyframe's detections again with the final map
+:class:`AlikeLandmarks` (driven by the runner, ``replay/stages.py``) turns a movement's keyframe
+detections into what the associator takes (bearings of landmarks with a class of their own,
+blobs per shared class), gives the estimator the named landmarks' bearings, and after the
+estimator has placed the movement lets the associator grow its hypotheses, makes the estimator
+forget the landmarks whose names were taken back, and hands it the earlier bearings of landmarks
+named now (:meth:`pipeline.joint.JointSlam.add_history`). Once the log is processed,
+:meth:`final` associates every keyframe's detections again with the final map
 (:func:`pipeline.association.final.associate_final`).
 """
 
@@ -16,12 +16,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from data_schemas.session import Session, shared_classes
-from pipeline.association import Associator, MovementAssociation, pose_between
 from pipeline.association.final import FinalDetection
+from pipeline.association.tracker import Associator, MovementAssociation, pose_between
 from pipeline.bearings import Detection, camera_view_rad
-from pipeline.estimators import Estimator
+from pipeline.estimators import AssociatingEstimator, Estimator
 from pipeline.joint.geometry import KeyframePose
-from pipeline.slam import MovementObservation, MovementResult
+from pipeline.slam import MovementObservation, MovementResult, MovementStatus
 
 #: Keyframe poses of the final map, (movement, end) -> pose.
 Poses = dict[tuple[int, int], KeyframePose]
@@ -59,9 +59,11 @@ class AlikeLandmarks:
         index: int,
         detections: tuple[Mapping[str, Detection], Mapping[str, Detection]],
         turn_rad: float | None,
+        distance_m: float | None,
         estimator: Estimator,
     ) -> tuple[MovementObservation, MovementAssociation]:
-        """The movement's observation for the estimator, named landmarks included."""
+        """The movement's observation for the estimator, named landmarks included (its commanded
+        turn and driven distance as given)."""
         unique = tuple(
             {
                 n: d.bearing_rad
@@ -88,48 +90,45 @@ class AlikeLandmarks:
             {**unique[0], **assoc.bearings_o1_rad},
             {**unique[1], **assoc.bearings_o2_rad},
             turn_rad,
+            distance_m,
         )
         return obs, assoc
 
     def after(
-        self, assoc: MovementAssociation, result: MovementResult, estimator: Estimator
+        self, assoc: MovementAssociation, result: MovementResult, estimator: AssociatingEstimator
     ) -> None:
         """Grow the hypotheses with the movement as the estimator placed it; name confirmed ones."""
         pose = None
-        if result.status == "ok" and result.o1_fl is not None and result.o2_fl is not None:
+        if (
+            result.status == MovementStatus.OK
+            and result.o1_fl is not None
+            and result.o2_fl is not None
+        ):
             pose = pose_between(result.o1_fl, result.o2_fl)
-        used = getattr(estimator, "used_movements", None)
-        path = getattr(estimator, "trajectory_fl", None)
-        trajectory = (
-            {k: pose_between(o1, o2) for k, (o1, o2) in zip(used, path, strict=True)}
-            if used is not None and path is not None
-            else None
+        trajectory = {
+            k: pose_between(o1, o2)
+            for k, (o1, o2) in zip(estimator.used_movements, estimator.trajectory_fl, strict=True)
+        }
+        self.associator.hypothesize(
+            assoc, pose, estimator.estimates, trajectory, estimator.bearing_scatter
         )
-        scatter = getattr(estimator, "bearing_scatter", None)
-        self.associator.hypothesize(assoc, pose, estimator.estimates, trajectory, scatter)
         for name in assoc.retracted:
             estimator.forget(name)
-        add_history = getattr(estimator, "add_history", None)
         for name, bearings in assoc.history.items():
-            if add_history is not None:
-                add_history(name, bearings)
+            estimator.add_history(name, bearings)
 
-    def final(self, estimator: Estimator) -> FinalAssociation | None:
+    def final(self, estimator: AssociatingEstimator) -> FinalAssociation:
         """Every keyframe's detections associated with ``estimator``'s final map and what it
         leaves open per class; when the unexplained ones point at a landmark, a free name of
         its class is given to it, or with every name given a doubtful one is retracted and
         given to it, or names under suspicion are given anew where their detections and those
         meet (:meth:`pipeline.association.Associator.repair_final`), the estimator settles
         (:meth:`pipeline.joint.JointSlam.settle`) and the association is made again, up to
-        :data:`REPAIR_ROUNDS` times (None: the estimator does not place its keyframes with
-        their covariances)."""
-        keyframe_poses = getattr(estimator, "keyframe_poses", None)
-        if keyframe_poses is None:
-            return None
+        :data:`REPAIR_ROUNDS` times."""
 
         def associate() -> tuple[list[FinalDetection], dict[str, str], Poses, list[int]]:
-            poses: Poses = keyframe_poses()
-            noise = getattr(estimator, "noise", None)
+            poses: Poses = estimator.keyframe_poses()
+            noise = estimator.noise
             sigma = None if noise is None else noise.sigma_rad
             left_out = self.associator.place_left_out(
                 self.keyframe_unique, self.keyframe_blobs, poses, estimator.estimates, sigma
@@ -141,10 +140,6 @@ class AlikeLandmarks:
             return found, reports, poses, sorted({m for m, _ in left_out})
 
         detections, reports, poses, placed = associate()
-        settle = getattr(estimator, "settle", None)
-        add_history = getattr(estimator, "add_history", None)
-        if settle is None or add_history is None:
-            return FinalAssociation(detections, reports, placed_by_matching=placed)
         last = max((m for m, _ in self.keyframe_blobs), default=-1)
         retracted: dict[str, str] = {}
         named_at_end: dict[str, str] = {}
@@ -155,8 +150,8 @@ class AlikeLandmarks:
             for name in repair.retracted:
                 estimator.forget(name)
             for name, bearings in repair.history.items():
-                add_history(name, bearings)
-            settle()
+                estimator.add_history(name, bearings)
+            estimator.settle()
             retracted.update(repair.retracted)
             named_at_end.update(repair.named_at_end)
             detections, reports, poses, placed = associate()
