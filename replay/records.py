@@ -309,7 +309,7 @@ class AssociationRecord:
         ``contested``, ``unexplained``, ``not placed``)."""
         out: dict[str, dict[str, int]] = {}
         for d in self.detections:
-            c = out.setdefault(d.label, {"detections": 0, **dict.fromkeys(STATUSES, 0)})
+            c = out.setdefault(d.label, {"detections": 0, **{str(s): 0 for s in STATUSES}})
             c["detections"] += 1
             c[d.status] += 1
         return out

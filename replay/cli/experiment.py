@@ -12,7 +12,7 @@ import click
 
 from data_schemas.errors import BslamError
 from replay import defaults
-from replay.cli.options import MAX_N_L, MAX_N_R, SEED, distance_prior_option
+from replay.cli.options import SEED, distance_prior_option, n_l_option, n_r_option
 from replay.experiments.protocol import (
     ALL_SWEEP_PARAMS,
     FRAME_CHANGES,
@@ -105,22 +105,8 @@ def _common(fn: Any) -> Any:
             show_default=True,
             help="Straight movements per trajectory.",
         ),
-        click.option(
-            "--n-r",
-            "n_r",
-            type=click.IntRange(2, MAX_N_R),
-            default=defaults.N_R,
-            show_default=True,
-            help="Particles per landmark in FR.",
-        ),
-        click.option(
-            "--n-l",
-            "n_l",
-            type=click.IntRange(2, MAX_N_L),
-            default=defaults.N_L,
-            show_default=True,
-            help="Particles per landmark in FL.",
-        ),
+        n_r_option,
+        n_l_option,
         click.option(
             "--priors",
             default=",".join(defaults.PRIORS),

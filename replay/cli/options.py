@@ -75,6 +75,23 @@ def window_options(fn: click.decorators.FC) -> click.decorators.FC:
 MAX_N_R = 2_000
 MAX_N_L = 100_000
 
+n_r_option = click.option(
+    "--n-r",
+    "n_r",
+    type=click.IntRange(2, MAX_N_R),
+    default=defaults.N_R,
+    show_default=True,
+    help="Particles per landmark in FR.",
+)
+n_l_option = click.option(
+    "--n-l",
+    "n_l",
+    type=click.IntRange(2, MAX_N_L),
+    default=defaults.N_L,
+    show_default=True,
+    help="Particles per landmark in FL.",
+)
+
 estimator_option = click.option(
     "--estimator",
     type=click.Choice(defaults.ESTIMATORS),
@@ -159,20 +176,8 @@ _METHOD_OPTIONS = [
         show_default=True,
         help="Density of one bearing: the paper's impartial PDF or a baseline.",
     ),
-    click.option(
-        "--n-r",
-        type=click.IntRange(2, MAX_N_R),
-        default=defaults.N_R,
-        show_default=True,
-        help="Particles per landmark in FR.",
-    ),
-    click.option(
-        "--n-l",
-        type=click.IntRange(2, MAX_N_L),
-        default=defaults.N_L,
-        show_default=True,
-        help="Particles per landmark in FL.",
-    ),
+    n_r_option,
+    n_l_option,
     click.option(
         "--seed",
         type=SEED,

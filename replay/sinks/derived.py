@@ -88,7 +88,7 @@ def _joint_fields(record: MovementRecord) -> dict[str, Any]:
     """The joint estimator's additions to ``/pipeline/estimate`` (absent ends left out)."""
     out: dict[str, Any] = {}
     if record.placement:
-        out["placement"] = record.placement
+        out["placement"] = str(record.placement)
     if record.bearing_noise_rad is not None:
         out["bearing_noise_rad"] = record.bearing_noise_rad
     if record.divergence:
@@ -178,7 +178,7 @@ class DerivedLogSink:
         estimate: dict[str, Any] = {
             "timestamp": stamp,
             "index": record.index,
-            "status": record.status,
+            "status": str(record.status),
             "estimator": self._run.estimator,
             "skipped_landmarks": [
                 {"name": n, "reason": r} for n, r in record.skipped_landmarks.items()
@@ -223,7 +223,7 @@ class DerivedLogSink:
                 "phase": ("start", "end")[d.end],
                 "class": d.label,
                 "bearing_rad": d.bearing_rad,
-                "status": d.status,
+                "status": str(d.status),
             }
             if d.name is not None:
                 row["name"] = d.name

@@ -141,7 +141,7 @@ class SummarySink:
         assert self._run is not None
         entry: dict[str, Any] = {
             "index": record.index,
-            "status": record.status,
+            "status": str(record.status),
             "bearings_deg": {
                 name: [_bearing_deg(b1), _bearing_deg(b2)]
                 for name, (b1, b2) in record.bearings_rad.items()
@@ -150,7 +150,7 @@ class SummarySink:
         if record.skipped_landmarks:
             entry["skipped_landmarks"] = dict(record.skipped_landmarks)
         if record.placement:
-            entry["placement"] = record.placement
+            entry["placement"] = str(record.placement)
         if record.residuals_rad:
             entry["residuals_deg"] = {
                 name: [_bearing_deg(r1), _bearing_deg(r2)]
