@@ -143,7 +143,7 @@ driving_method_options = [
         type=FiniteFloat(min=0.0, min_open=True),
         default=None,
         metavar="M_PER_M",
-        help="Driving logs: odometry position std per metre of path [default: 0.05].",
+        help="Driving logs: odometry position std per metre of path [default: 0.1].",
     ),
     click.option(
         "--odometry-heading-std",
@@ -151,7 +151,7 @@ driving_method_options = [
         type=FiniteFloat(min=0.0, min_open=True),
         default=None,
         metavar="RAD_PER_RAD",
-        help="Driving logs: odometry heading std per radian turned [default: 0.05].",
+        help="Driving logs: odometry heading std per radian turned [default: 0.2].",
     ),
 ]
 

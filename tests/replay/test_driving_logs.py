@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -152,3 +153,22 @@ def test_paper_estimator_refuses_a_driving_log(drive_log: Path) -> None:
     result = CliRunner().invoke(cli, ["process", str(drive_log), "--estimator", "paper"])
     assert result.exit_code == 1
     assert "Error: " in result.output and "stop-and-go" in result.output
+
+
+def test_help_states_the_driving_estimators_defaults() -> None:
+    from pipeline.driving.keyframes import KEYFRAME_DISTANCE_M, KEYFRAME_TURN_RAD
+    from pipeline.driving.odometry import ROT_STD_PER_RAD, TRANS_STD_PER_M
+
+    want = {
+        "keyframe_distance_m": KEYFRAME_DISTANCE_M,
+        "keyframe_turn_deg": math.degrees(KEYFRAME_TURN_RAD),
+        "odometry_std_per_m": TRANS_STD_PER_M,
+        "odometry_heading_std_per_rad": ROT_STD_PER_RAD,
+    }
+    for command in ("process", "replay"):
+        with click.Context(cli) as ctx:
+            found = cli.get_command(ctx, command)  # type: ignore[attr-defined]
+        assert found is not None
+        params = {p.name: p for p in found.params}
+        for name, value in want.items():
+            assert f"[default: {value:g}]" in (params[name].help or ""), (command, name)
