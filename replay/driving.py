@@ -1,15 +1,23 @@
 """A driving robot's log through the driving estimator to the sinks.
 
-A log whose session has no camera carries its bearings on ``/sensor/bearings`` and its wheel
-odometry on ``/robot/odometry_pose`` (``bslam import``, ``bslam simulate`` of a driving
-scenario). :class:`DrivingRunner` reads them, with the truth (``/sim/ground_truth``,
-``/truth/robot_pose``) when the log has it, in one pass in log order, feeds
-:class:`pipeline.driving.estimator.DrivingSlam`, and hands the sinks the records they already
-know: each keyframe is a :class:`~replay.records.FrameRecord` (its bearings) and, with the next
-keyframe, a :class:`~replay.records.MovementRecord` (``o1_fl``, ``o2_fl``: the two keyframes in
-FL; ``rays_fl``: its bearings as rays; ``estimates``: the map). The map is in FL once both
-reference landmarks are mapped (before that the records carry no FL positions); the last
-record's estimates carry iSAM2's marginal covariances (the others none: marginals cost).
+A driving log has wheel odometry on ``/robot/odometry_pose`` and no movement plan, and its
+bearings either on ``/sensor/bearings`` (a session without a camera: ``bslam import``, a
+simulated drive) or in camera frames on ``/camera/panorama`` (``bslam import rosbag``,
+``bslam import images``). :class:`DrivingRunner` reads them, with the truth
+(``/sim/ground_truth``, ``/truth/robot_pose``) when the log has it, in one pass in log order,
+feeds :class:`pipeline.driving.estimator.DrivingSlam`, and hands the sinks the records they
+already know: each keyframe is a :class:`~replay.records.FrameRecord` (its bearings) and, with
+the next keyframe, a :class:`~replay.records.MovementRecord` (``o1_fl``, ``o2_fl``: the two
+keyframes in FL; ``rays_fl``: its bearings as rays; ``estimates``: the map). The map is in FL
+once both reference landmarks are mapped (before that the records carry no FL positions); the
+last record's estimates carry iSAM2's marginal covariances (the others none: marginals cost).
+
+Frames: the first frame logged after odometry makes a keyframe is that keyframe's frame; its
+bearings (the session's extractor, as :class:`replay.stages.Runner` uses it) go to the estimator,
+which keeps one bearing per landmark per keyframe anyway. Other frames are decoded only for a
+sink that wants every frame, and never reach the estimator (the map does not depend on the
+sinks). A mapped landmark that the keyframe's camera cannot see (predicted outside a pinhole's
+field of view) is reported as not visible there, not as missed.
 """
 
 from __future__ import annotations
@@ -32,19 +40,28 @@ from data_schemas.registry import (
     TRUTH_POSE_TOPIC,
 )
 from data_schemas.stamps import ns_from_stamp
-from pipeline.bearings import Detection
+from pipeline.association.predict import outside_view
+from pipeline.bearings import Detection, camera_view_rad
 from pipeline.driving.estimator import DrivingOptions, DrivingSlam, KeyframeResult
 from pipeline.driving.odometry import compose
 from pipeline.slam import MovementStatus, Placement
 from replay.plan import MovementPlan
 from replay.records import FrameRecord, MethodConfig, MovementRecord, RunInfo, Sink
-from replay.stages import MessageLog, estimate_records
+from replay.stages import (
+    MessageLog,
+    decode_image,
+    estimate_records,
+    no_camera,
+    session_extractor,
+)
 
 #: the robot's true pose: the simulator's, or an imported log's outside reference
 TRUTH_POSE_TOPICS = (SIM_TRUTH_TOPIC, TRUTH_POSE_TOPIC)
 DRIVING_TOPICS = (BEARINGS_TOPIC, ODOMETRY_POSE_TOPIC, *TRUTH_POSE_TOPICS)
 #: Length (FL) of a ray drawn towards a landmark not in the map yet.
 RAY_FL = 1.5
+#: Why a mapped landmark has no bearing at a keyframe whose camera cannot see it.
+OUTSIDE_VIEW = "outside the camera's field of view"
 #: Keyframes between two progress lines on the ``bslam.replay`` logger (INFO).
 PROGRESS_EVERY = 100
 
@@ -99,10 +116,19 @@ def _detections(names: Sequence[str], r: KeyframeResult) -> dict[str, Detection]
 
 
 class DrivingRunner:
-    """One driving log through :class:`DrivingSlam` to the sinks (see the module doc)."""
+    """One driving log through :class:`DrivingSlam` to the sinks (see the module doc).
+
+    ``frames``: bearings come from the camera's frames (else from ``/sensor/bearings``).
+    """
 
     def __init__(
-        self, log: MessageLog, method: MethodConfig, sinks: Sequence[Sink], info: RunInfo
+        self,
+        log: MessageLog,
+        method: MethodConfig,
+        sinks: Sequence[Sink],
+        info: RunInfo,
+        *,
+        frames: bool = False,
     ) -> None:
         if method.estimator == "paper":
             raise EstimationError(
@@ -123,15 +149,30 @@ class DrivingRunner:
         self.truth = MovementPlan()
         self._held: MovementRecord | None = None
         self._log_time_ns: dict[int, int] = {}
+        self.frames = frames
+        self.view_rad = camera_view_rad(self.session.calibration) if frames else None
+        self.all_frames = frames and any(s.wants_all_frames for s in self.sinks)
+        self.images = frames and any(s.wants_images for s in self.sinks)
+        #: keyframes made when the last frame was handed to the estimator
+        self._framed = 0
+        self.extractor = session_extractor(self.session) if frames else None
+        if frames and self.extractor is None:
+            raise no_camera(log.name)
 
     def run(self) -> None:
         for sink in self.sinks:
             sink.start(self.info)
         try:
-            for msg in self.log.messages(DRIVING_TOPICS):
+            topics = (*DRIVING_TOPICS, CAMERA_TOPIC) if self.frames else DRIVING_TOPICS
+            for msg in self.log.messages(topics):
+                keyframe = self.slam.n_keyframes > self._framed
+                if msg.topic == CAMERA_TOPIC and not (keyframe or self.all_frames):
+                    continue
                 doc = msg.decode()
                 t_ns = ns_from_stamp(doc["timestamp"])
-                if msg.topic == ODOMETRY_POSE_TOPIC:
+                if msg.topic == CAMERA_TOPIC:
+                    self._frame(msg.schema, doc, t_ns, msg.log_time_ns, keyframe=keyframe)
+                elif msg.topic == ODOMETRY_POSE_TOPIC:
                     pose = np.array([doc["x_m"], doc["y_m"], doc["theta_rad"]], np.float64)
                     self._log_time_ns[t_ns] = msg.log_time_ns
                     self._emit(self.slam.odometry(t_ns, pose))
@@ -153,6 +194,47 @@ class DrivingRunner:
         finally:
             for sink in self.sinks:
                 sink.finish()
+
+    def _frame(
+        self, schema: str, doc: dict[str, Any], t_ns: int, log_time_ns: int, *, keyframe: bool
+    ) -> None:
+        """One decoded frame: to the sinks; a keyframe's bearings to the estimator."""
+        extractor = self.extractor
+        assert extractor is not None
+        image, png = decode_image(schema, doc)
+        if self.images:
+            found, masks = extractor.extract_with_masks(image)
+        else:
+            found, masks = extractor.extract(image), None
+        k = self.slam.n_keyframes - 1
+        frame = FrameRecord(
+            t_ns,
+            log_time_ns,
+            (k, "start") if keyframe else None,
+            found,
+            image_bgr=image if self.images else None,
+            masks=masks,
+            png=png if self.images else None,
+        )
+        for sink in self.sinks:
+            sink.frame(frame)
+        if keyframe:
+            self._framed = self.slam.n_keyframes
+            seen = {n: d.bearing_rad for n, d in found.items() if d.bearing_rad is not None}
+            self.slam.bearings(t_ns, {n: float(b) for n, b in seen.items()})
+
+    def _outside_view(self, r: KeyframeResult) -> dict[str, str]:
+        """Mapped landmarks without a bearing at keyframe ``r`` that its camera cannot see."""
+        if self.view_rad is None:
+            return {}
+        points = self.slam.landmarks_m()
+        names = [n for n in points if n not in r.rays]
+        if not names:
+            return {}
+        d = np.array([points[n] for n in names]) - r.pose_m[:2]
+        bearing = np.arctan2(d[:, 1], d[:, 0]) - r.pose_m[2]
+        out = outside_view(bearing, np.zeros(len(names)), self.view_rad, n_std=0.0)
+        return {n: OUTSIDE_VIEW for n, o in zip(names, out, strict=True) if o}
 
     def _emit(self, results: list[KeyframeResult]) -> None:
         for r in results:
@@ -184,9 +266,10 @@ class DrivingRunner:
         log_time_ns = self._log_time_ns.pop(r.t_ns, r.t_ns)
         for t in [t for t in self._log_time_ns if t < r.t_ns]:
             del self._log_time_ns[t]
-        frame = FrameRecord(r.t_ns, log_time_ns, (r.index, "start"), _detections(names, r))
-        for sink in self.sinks:
-            sink.frame(frame)
+        if not self.frames:  # frames went to the sinks as they came
+            frame = FrameRecord(r.t_ns, log_time_ns, (r.index, "start"), _detections(names, r))
+            for sink in self.sinks:
+                sink.frame(frame)
         ends = self.slam.to_fl(np.array([r.pose_m[:2], r.next_pose_m[:2]]))
         rays_fl = {} if ends is None else dict(self._rays_fl(r))
         return MovementRecord(
@@ -204,6 +287,7 @@ class DrivingRunner:
             placement=Placement.ODOMETRY,
             map_unit_m=self.slam.unit_m,
             rays_fl=rays_fl,
+            not_visible=self._outside_view(r),
         )
 
     def _rays_fl(self, r: KeyframeResult) -> Iterator[tuple[str, NDArray[np.float64]]]:

@@ -33,7 +33,14 @@ from numpy.typing import NDArray
 from data_schemas.errors import EstimationError, ImageError, MissingMetadataError, SchemaError
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
-from data_schemas.registry import BEARINGS_TOPIC, CAMERA_TOPIC, IMAGE_SCHEMA, image_encoding
+from data_schemas.registry import (
+    BEARINGS_TOPIC,
+    CAMERA_TOPIC,
+    IMAGE_SCHEMA,
+    MOVEMENT_TOPIC,
+    ODOMETRY_POSE_TOPIC,
+    image_encoding,
+)
 from data_schemas.session import Session, shared_classes, shared_reference_problem
 from data_schemas.stamps import ns_from_stamp
 from pipeline.association.alike import AlikeLandmarks
@@ -126,6 +133,24 @@ def estimate_records(estimates: Mapping[str, LandmarkEstimate]) -> dict[str, Est
     return out
 
 
+def session_extractor(session: Session) -> BearingExtractor | TagExtractor | None:
+    """The extractor of a session's frames (its camera and catalog); None without a camera."""
+    cal = session.calibration
+    if cal is None:
+        return None
+    return make_extractor(
+        cal, session.landmarks, range_m=session.range_m, tag_dictionary=session.tag_dictionary
+    )
+
+
+def no_camera(name: str) -> MissingMetadataError:
+    """The error of a log with frames whose session has no camera."""
+    return MissingMetadataError(
+        f"{name}: frames on /camera/panorama but the session has no camera "
+        "(no calibration); a log without a camera carries /sensor/bearings instead"
+    )
+
+
 @dataclass
 class _Keyframe:
     timestamp_ns: int
@@ -180,17 +205,7 @@ class Runner:
         shared = shared_reference_problem(self.session.landmarks, self.session.reference)
         if shared:
             raise EstimationError(f"{log.name}: {shared}")
-        cal = self.session.calibration
-        self._extractor = (
-            None
-            if cal is None
-            else make_extractor(
-                cal,
-                self.session.landmarks,
-                range_m=self.session.range_m,
-                tag_dictionary=self.session.tag_dictionary,
-            )
-        )
+        self._extractor = session_extractor(self.session)
         alike = shared_classes(self.session.landmarks)
         if alike and method.estimator == "paper":
             classes = ", ".join(f"{c} ({', '.join(n)})" for c, n in alike.items())
@@ -211,10 +226,7 @@ class Runner:
     def extractor(self) -> BearingExtractor | TagExtractor:
         """Bearings from frames; a session without a camera has frames to refuse."""
         if self._extractor is None:
-            raise MissingMetadataError(
-                f"{self.log.name}: frames on /camera/panorama but the session has no camera "
-                "(no calibration); a log without a camera carries /sensor/bearings instead"
-            )
+            raise no_camera(self.log.name)
         return self._extractor
 
     def run(self) -> None:
@@ -484,13 +496,28 @@ def run_log(
         _run_one(opened, method, sinks)
 
 
+def driving_log(topics: Collection[str] | None, session: Session) -> bool:
+    """Whether a log goes through :class:`replay.driving.DrivingRunner` (docs/design.md).
+
+    A log with bearings (``/sensor/bearings``), or with odometry poses
+    (``/robot/odometry_pose``) and no movement plan (``/robot/movement``), is a driving log;
+    frames with a movement plan (stop-and-go) go through :class:`Runner`. ``topics`` None: a
+    log still being written, its channels still to come: driving if its session has no camera.
+    """
+    if topics is None:
+        return session.calibration is None
+    odometry_only = ODOMETRY_POSE_TOPIC in topics and MOVEMENT_TOPIC not in topics
+    return BEARINGS_TOPIC in topics or odometry_only
+
+
 def _run_one(log: MessageLog, method: MethodConfig, sinks: Sequence[Sink]) -> None:
-    """Frames through :class:`Runner`; a log without a camera (bearings and odometry) through
-    :class:`replay.driving.DrivingRunner`."""
+    """Stop-and-go frames through :class:`Runner`; a driving log (:func:`driving_log`) through
+    :class:`replay.driving.DrivingRunner`, its bearings from ``/sensor/bearings`` or else from
+    its frames."""
     from replay.driving import DrivingRunner, check_topics
 
     topics = getattr(log, "topics", None)  # None: a followed log, its channels still to come
-    driving = log.session.calibration is None if topics is None else BEARINGS_TOPIC in topics
+    driving = driving_log(topics, log.session)
     if not driving:
         Runner(log, method, sinks).run()  # its messages are checked (and refused) first
         if topics is not None:
@@ -500,4 +527,5 @@ def _run_one(log: MessageLog, method: MethodConfig, sinks: Sequence[Sink]) -> No
         check_topics(log.name, list(topics))
     truth = truth_of_session(log.session)
     info = RunInfo(log.name, log.session, method, truth, driving=True)
-    DrivingRunner(log, method, sinks, info).run()
+    frames = topics is not None and CAMERA_TOPIC in topics and BEARINGS_TOPIC not in topics
+    DrivingRunner(log, method, sinks, info, frames=frames).run()
