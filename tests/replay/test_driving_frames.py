@@ -7,6 +7,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -37,17 +38,12 @@ def pinhole_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @dataclass
 class Kept:
-    """A sink that keeps what it is given (``all_frames``: it asks for every frame)."""
+    """A sink that keeps what it is given (``wants_all_frames``: it asks for every frame)."""
 
-    all_frames: bool = False
+    wants_all_frames: bool = False
     frames: list[FrameRecord] = field(default_factory=list)
     movements: list[MovementRecord] = field(default_factory=list)
-
-    @property
-    def wants_all_frames(self) -> bool:
-        return self.all_frames
-
-    wants_images = False
+    wants_images: bool = False
 
     def start(self, run: RunInfo) -> None:
         assert run.driving
@@ -65,7 +61,7 @@ class Kept:
         pass
 
 
-def _keyframe_times_by_hand(odometry: list[dict[str, float]]) -> list[int]:
+def _keyframe_times_by_hand(odometry: list[dict[str, Any]]) -> list[int]:
     """Times (ns) of the keyframes of the rule along the odometry: path >= 0.3 m or turning
     >= 20 deg since the last one."""
     out, path, turn, last = [], 0.0, 0.0, None
@@ -127,7 +123,7 @@ def test_frames_and_odometry_map_through_the_driving_estimator(
 def test_a_sink_wanting_every_frame_changes_no_bearing_of_the_map(
     pinhole_log: Path, kept: Kept
 ) -> None:
-    few, every = kept, Kept(all_frames=True)
+    few, every = kept, Kept(wants_all_frames=True)
     run_log(pinhole_log, MethodConfig(), [every])
     _, messages = read_back(pinhole_log)
     assert len(every.frames) == len(on(messages, "/camera/panorama"))
