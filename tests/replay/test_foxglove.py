@@ -4,8 +4,9 @@ with the mcap library, and read by Foxglove's own MCAP reader and JSON-schema pa
 Oracles: the JSON Schemas of the npm package ``@foxglove/schemas`` (read by Node, compared with
 the vendored files), the jsonschema library, the other channels of the same log and the summary
 (means, particles), the 80% region's Mahalanobis radius (chi-square, 2 dof: -2 ln 0.2), and
-Foxglove's parser (``tests/foxglove_js/check_mcap.mjs``). The Node tests are skipped only where
-Node is not installed; ``npm install`` in ``tests/foxglove_js`` brings the pinned packages.
+Foxglove's parser (``tests/foxglove_js/check_mcap.mjs``). The Node tests are slow (``npm install``
+in ``tests/foxglove_js`` brings the pinned packages, ~190 MB on a fresh machine) and are skipped
+only where Node is not installed.
 """
 
 from __future__ import annotations
@@ -85,6 +86,7 @@ def _published(node: str) -> dict[str, Any]:
     return schemas
 
 
+@pytest.mark.slow  # npm install of Foxglove's packages (~190 MB) on a fresh machine
 def test_vendored_schemas_are_the_published_ones(node: str) -> None:
     published = _published(node)
     files = sorted(VENDORED.glob("foxglove.*.json"))
@@ -176,6 +178,7 @@ def _check(node: str, log: Path) -> dict[str, Any]:
     return report
 
 
+@pytest.mark.slow  # npm install of Foxglove's packages (~190 MB) on a fresh machine
 def test_foxglove_parser_reads_every_channel_of_a_derived_log(node: str, derived: Path) -> None:
     report = _check(node, derived)
     counts = {t: len(m) for t, m in _messages(derived).items()}
@@ -185,6 +188,7 @@ def test_foxglove_parser_reads_every_channel_of_a_derived_log(node: str, derived
     assert report["/pipeline/particles"]["first"]["data"]["bytes"] > 0  # base64 made bytes
 
 
+@pytest.mark.slow  # npm install of Foxglove's packages (~190 MB) on a fresh machine
 def test_foxglove_parser_check_refuses_what_foxglove_cannot_read(node: str, tmp_path: Path) -> None:
     """The helper can fail: a nullable field, and a message whose field has the wrong type."""
     log = tmp_path / "bad.mcap"
