@@ -184,8 +184,8 @@ def result_line(doc: dict[str, Any]) -> str:
         missing = [label for label, c in final.items() if "warning" in c]
         if missing:
             text += (
-                f"; with the final map, {', '.join(missing)}: detections no name explains, "
-                "though every name is given (a landmark may be missing)"
+                f"; with the final map, {', '.join(missing)}: detections no name explains "
+                "(a landmark may be missing)"
             )
         if assoc.get("doubtful"):
             text += (
@@ -195,4 +195,7 @@ def result_line(doc: dict[str, Any]) -> str:
         if assoc.get("unconfirmed"):
             names = ", ".join(assoc["unconfirmed"])
             text += f"; unconfirmed: {names} (seen too few times since named to tell)"
+    trust = doc.get("trust")
+    if trust is not None and not trust["trustworthy"]:
+        text += f"; the map is NOT trustworthy: {'; '.join(trust['reasons'])}"
     return text

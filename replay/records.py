@@ -279,8 +279,8 @@ class AssociationRecord:
     detections : list of FinalDetection
         Every keyframe detection of a shared class, its name (if any) and status.
     reports : dict label -> str
-        Classes whose names are all given but whose detections the final map leaves
-        unexplained too often (:func:`pipeline.association.final.missing_reports`).
+        Classes whose detections the final map leaves unexplained too often (every name
+        given or not) (:func:`pipeline.association.final.missing_reports`).
     retracted : dict name -> str
         Names under suspicion (doubtful, or given few of their predicted detections) taken
         back once the log was processed and given anew where the final map's unexplained

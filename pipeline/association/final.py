@@ -11,8 +11,8 @@ pairs unique by a margin, :data:`FINAL_MARGIN_CHI2`, the nearest of landmarks in
 their blob). Prediction variance: the point's covariance, the keyframe pose's, and the map's
 estimated bearing noise; the bearings it names are not given to the estimator.
 A lone blob where named landmarks line up (none clearly in front) is said to be theirs
-("in line"). :func:`missing_reports` says when a class whose names are all given still has
-detections no name explains, and where their rays meet (:func:`meeting_point`;
+("in line"). :func:`missing_reports` says when a class still has detections no name explains
+(every name of it given or not), and where their rays meet (:func:`meeting_point`;
 :meth:`pipeline.association.Associator.repair_final` may then give a free name, or a doubtful
 one, there).
 """
@@ -208,14 +208,14 @@ def _assign(
 
 def missing_reports(
     detections: Sequence[FinalDetection],
-    full: Sequence[str],
+    given: Mapping[str, tuple[int, int]],
     poses: Mapping[tuple[int, int], KeyframePose],
     eps_rad: float,
 ) -> dict[str, str]:
-    """Per class of ``full`` (every name of it given) with at least
-    :data:`MISSING_UNEXPLAINED` detections left unexplained by the final map: what to say,
-    with where their rays meet (:func:`meeting_point`, keyframes from ``poses``) when rays of
-    :data:`MISSING_KEYFRAMES` keyframes or more do.
+    """Per class of ``given`` (label -> names given, names in the catalog) with at least
+    :data:`MISSING_UNEXPLAINED` detections left unexplained by the final map, whether or not
+    every name of it is given: what to say, with where their rays meet (:func:`meeting_point`,
+    keyframes from ``poses``) when rays of :data:`MISSING_KEYFRAMES` keyframes or more do.
 
     Returns
     -------
@@ -223,17 +223,26 @@ def missing_reports(
         The report for each such class.
     """
     out = {}
-    for label in full:
+    for label, (named, capacity) in given.items():
         left = [d for d in detections if d.label == label and d.status == Status.UNEXPLAINED]
         if len(left) < MISSING_UNEXPLAINED:
             continue
         keyframes = len({(d.movement, d.end) for d in left})
+        total = sum(1 for d in detections if d.label == label)
         text = (
-            f"{len(left)} detection(s) of {label} at {keyframes} keyframe(s) explained by no "
-            f"named landmark with the final map, though every name of {label} is given: a "
-            "landmark may be missing from the map, and a name may stand where rays of "
-            "several landmarks meet"
+            f"{len(left)} of {total} detection(s) of {label} at {keyframes} keyframe(s) "
+            "explained by no named landmark with the final map"
         )
+        if named >= capacity:
+            text += (
+                f", though every name of {label} is given: a landmark may be missing from the "
+                "map, and a name may stand where rays of several landmarks meet"
+            )
+        else:
+            text += (
+                f", {named} of {capacity} names of {label} given: landmark(s) of {label} are "
+                "missing from the map"
+            )
         met = meeting_point(unexplained_rays(detections, label, poses), eps_rad)
         if met is not None and len(met[1]) >= MISSING_KEYFRAMES:
             x, y = met[0]

@@ -281,8 +281,8 @@ class Associator:
     ) -> tuple[list[FinalDetection], dict[str, str]]:
         """Every keyframe's detections associated with the final map (the estimator's
         ``mapped`` landmarks and keyframe ``poses``) under the names given so far
-        (:func:`pipeline.association.final.associate_final`), and per class whose names are
-        all given, a report when the final map leaves too many of its detections unexplained
+        (:func:`pipeline.association.final.associate_final`), and per class (every name of it
+        given or not) a report when the final map leaves too many of its detections unexplained
         (:func:`pipeline.association.final.missing_reports`). ``noise_rad``: the map's
         bearing noise std (default the one eps implies)."""
         known = {
@@ -296,8 +296,8 @@ class Associator:
             noise_rad=self.sigma_rad if noise_rad is None else noise_rad,
             eps_rad=self.eps_rad,
         )
-        full = [c for c, n in self.capacity.items() if len(self.named[c]) >= n]
-        return final, missing_reports(final, full, poses, self.eps_rad)
+        given = {c: (len(self.named[c]), n) for c, n in self.capacity.items()}
+        return final, missing_reports(final, given, poses, self.eps_rad)
 
     def place_left_out(
         self,

@@ -21,15 +21,16 @@ name (at their keyframe or later, ``named_from``), the names still ``doubtful`` 
 movement (name -> why: seen too rarely where predicted since named, or bearings that scatter too
 widely), those still ``unconfirmed`` (name -> why), per class ``final_map``: the keyframe
 detections associated again with the final map once the log is processed (``named``,
-``contested``, ``unexplained``, ``not placed``, ``per_name``, a ``warning`` when every
-name of the class is given but the final map leaves several of its detections unexplained,
+``contested``, ``unexplained``, ``not placed``, ``per_name``, a ``warning`` when the final
+map leaves several of its detections unexplained, every name of the class given or not,
 ``retracted``: names taken back then and given to the landmark those detections point at,
 and ``named_at_end``: free names given then to landmarks unexplained detections point at; the
 map after either is the document's ``landmarks``), ``placed_by_matching`` (movements the map left
 out, placed for that association by matching their detections with the final map) and, for
 simulated logs, ``matched_truth``
 (each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
-measured against it).
+measured against it). ``trust`` says whether the map is ``trustworthy`` and, when not, the
+``reasons`` (:mod:`replay.trust`).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from replay.records import (
     MovementRecord,
     RunInfo,
 )
+from replay.trust import trust_entry
 from replay.truth import class_of_name, errors_m, match_truth
 
 DIGITS = 9
@@ -244,6 +246,7 @@ class SummarySink:
         if self._errors_m:
             self.document["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}
             self.document["mean_error_m"] = _num(float(np.mean(list(self._errors_m.values()))))
+        self.document["trust"] = trust_entry(self.document)
 
     def _association_summary(self, run: RunInfo) -> None:
         """Per shared class: the names given, how many movements left something unresolved."""

@@ -1,0 +1,110 @@
+"""Calibration of the joint map per arena family: do its 80% regions hold the truth 80% of the time?
+
+One run: simulate a log of a family's scenario (:mod:`replay.experiments.families`), extract its
+bearings (``bslam process``), run the joint estimator on them (distance prior as the default)
+and batch least squares, and score every landmark of the final map: its error, batch least
+squares' error, and the squared Mahalanobis distance of the truth under the map's covariance
+(inside the 80% region when at most the chi-square(2) quantile).
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from data_schemas.errors import EstimationError
+from pipeline.batch_ls import batch_least_squares
+from pipeline.estimators import DEFAULT_DISTANCE_PRIOR_REL, make_estimator
+from replay.experiments.families import family_scenario
+from replay.experiments.methods import observations_from_summary
+from replay.experiments.run import read_log_plan, simulate
+from replay.experiments.scoring import CHI2_2_LEVEL
+from replay.truth import truth_from_scenario
+
+
+@dataclass(frozen=True)
+class LandmarkScore:
+    """One landmark of one run's final joint map.
+
+    Attributes
+    ----------
+    family, seed, name : str, int, str
+    error_cm, batch_ls_cm : float
+        Distance to the truth of the joint map's and of batch least squares' estimate (NaN:
+        least squares did not place it).
+    d2 : float
+        Squared Mahalanobis distance of the truth under the joint map's covariance.
+    sigma_deg : float
+        The map's estimated bearing noise.
+    """
+
+    family: str
+    seed: int
+    name: str
+    error_cm: float
+    batch_ls_cm: float
+    d2: float
+    sigma_deg: float
+
+    @property
+    def inside(self) -> bool:
+        """Whether the truth lies in the 80% region."""
+        return self.d2 <= CHI2_2_LEVEL
+
+
+def score_run(family: str, seed: int, folder: Path | None = None) -> list[LandmarkScore]:
+    """Simulate, process and score one run of ``family`` drawn from ``seed``."""
+    from replay.process import process_log
+    from replay.records import MethodConfig
+
+    doc = family_scenario(family, seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(folder or tmp) / f"{family}_{seed}.mcap"
+        simulate(doc, log, seed=seed)
+        summary = process_log(log, MethodConfig(seed=seed, estimator="paper"))
+        plan = read_log_plan(log)
+    observations = [
+        replace(o, turn_rad=plan.turns_rad.get(o.index), distance_m=plan.distances_m.get(o.index))
+        for o in observations_from_summary(summary)
+    ]
+    reference = (doc["reference"][0], doc["reference"][1])
+    truth = truth_from_scenario(doc, reference)
+    truth_fl, scale_cm = truth.landmarks_fl(), 100.0 * truth.to_fl.unit_m
+    names = [lm["name"] for lm in doc["landmarks"]]
+    slam = make_estimator(
+        "joint",
+        names,
+        reference,
+        vision_error_rad=math.radians(float(doc["vision_error_deg"])),
+        rng=np.random.default_rng(seed),
+        distance_prior_rel=DEFAULT_DISTANCE_PRIOR_REL,
+    )
+    result = None
+    for obs in observations:
+        result = slam.process_movement(obs)
+    try:
+        ls = batch_least_squares(observations, names, reference)
+    except EstimationError:
+        ls = {}
+    out = []
+    noise = getattr(result, "noise", None)
+    sigma_deg = math.degrees(noise.sigma_rad) if noise is not None else math.nan
+    for name, est in (result.estimates if result is not None else {}).items():
+        d = est.mean_fl - truth_fl[name]
+        cov = np.asarray(est.cov_fl, np.float64)
+        d2 = float(d @ np.linalg.solve(cov, d)) if np.linalg.det(cov) > 0.0 else math.inf
+        b = ls.get(name)
+        ls_cm = math.nan if b is None else scale_cm * float(np.hypot(*(b - truth_fl[name])))
+        out.append(
+            LandmarkScore(family, seed, name, scale_cm * float(np.hypot(*d)), ls_cm, d2, sigma_deg)
+        )
+    return out
+
+
+def coverage(scores: list[LandmarkScore]) -> float:
+    """Share of the landmarks whose truth lies in their 80% region."""
+    return float(np.mean([s.inside for s in scores])) if scores else math.nan

@@ -1,0 +1,47 @@
+"""Whether a processed log's map can be trusted, from its summary document.
+
+A map is not trustworthy when its own evidence says so: a class of look-alike landmarks has
+detections that no name explains with the final map (a landmark missing, or a name where rays
+of several landmarks meet), names are doubtful or unconfirmed (flagged one by one), or the
+bearings of several movements do not fit the map (they were skipped as not fitting it, or the
+map diverged with them), or fewer than half of the movements are in the map. The verdict is a
+result, not an error: ``bslam process`` says it and exits 0.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+#: This many movements skipped because their bearings did not fit the map make it doubtful.
+MISFIT_MOVEMENTS = 2
+#: Statuses of movements skipped because their bearings did not fit the map.
+MISFIT_STATUSES = ("does not fit the map", "the map diverged")
+
+
+def trust_reasons(doc: dict[str, Any]) -> list[str]:
+    """Why the map of a summary document is not trustworthy (empty: nothing says so)."""
+    reasons = []
+    moves = doc.get("movements", [])
+    used = sum(1 for m in moves if m.get("status") == "ok")
+    if moves and 2 * used < len(moves):
+        reasons.append(f"only {used} of {len(moves)} movements are in the map")
+    misfit = [m["index"] for m in moves if any(s in m.get("status", "") for s in MISFIT_STATUSES)]
+    if len(misfit) >= MISFIT_MOVEMENTS:
+        reasons.append(
+            f"the bearings of movement(s) {', '.join(map(str, misfit))} do not fit the map"
+        )
+    assoc = doc.get("association") or {}
+    for label, c in sorted(assoc.get("final_map", {}).items()):
+        if "warning" in c:
+            reasons.append(f"detections of {label} that no name explains")
+    for key in ("doubtful", "unconfirmed"):
+        names = assoc.get(key) or {}
+        if names:
+            reasons.append(f"{key} name(s) {', '.join(sorted(names))}")
+    return reasons
+
+
+def trust_entry(doc: dict[str, Any]) -> dict[str, Any]:
+    """The summary's ``trust`` entry: ``trustworthy`` and, when not, ``reasons``."""
+    reasons = trust_reasons(doc)
+    return {"trustworthy": not reasons, **({"reasons": reasons} if reasons else {})}
