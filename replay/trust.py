@@ -4,18 +4,25 @@ A map is not trustworthy when its own evidence says so: a class of look-alike la
 detections that no name explains with the final map (a landmark missing, or a name where rays
 of several landmarks meet), names are doubtful or unconfirmed (flagged one by one), or the
 bearings of several movements do not fit the map (they were skipped as not fitting it, or the
-map diverged with them), or fewer than half of the movements are in the map. The verdict is a
+map diverged with them), or fewer than half of the movements are in the map, or the map has
+collapsed (landmarks where the robot stood). The verdict is a
 result, not an error: ``bslam process`` says it and exits 0.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 #: This many movements skipped because their bearings did not fit the map make it doubtful.
 MISFIT_MOVEMENTS = 2
 #: Statuses of movements skipped because their bearings did not fit the map.
 MISFIT_STATUSES = ("does not fit the map", "the map diverged")
+#: A landmark this close (FL) to a keyframe of the map stands where the robot stood: the map
+#: has collapsed onto a point where bearings are undefined (and its covariances mean nothing).
+#: The robot's body keeps it several centimetres from any landmark, over 1% of any |L1 L2|
+#: of a few metres.
+COLLAPSE_FL = 0.005
 
 
 def trust_reasons(doc: dict[str, Any]) -> list[str]:
@@ -30,6 +37,11 @@ def trust_reasons(doc: dict[str, Any]) -> list[str]:
         reasons.append(
             f"the bearings of movement(s) {', '.join(map(str, misfit))} do not fit the map"
         )
+    collapsed = _collapsed(doc)
+    if collapsed:
+        reasons.append(
+            f"the map collapsed: {', '.join(collapsed)} where the robot stood (a degenerate fit)"
+        )
     assoc = doc.get("association") or {}
     for label, c in sorted(assoc.get("final_map", {}).items()):
         if "warning" in c:
@@ -39,6 +51,19 @@ def trust_reasons(doc: dict[str, Any]) -> list[str]:
         if names:
             reasons.append(f"{key} name(s) {', '.join(sorted(names))}")
     return reasons
+
+
+def _collapsed(doc: dict[str, Any]) -> list[str]:
+    """Landmarks of the final map within :data:`COLLAPSE_FL` of a keyframe of the map."""
+    points = [
+        p for m in doc.get("movements", []) for p in (m.get("observation_points") or {}).values()
+    ]
+    out = []
+    for name, est in doc.get("landmarks", {}).items():
+        x, y = est["mean"]
+        if any(math.hypot(x - px, y - py) < COLLAPSE_FL for px, py in points):
+            out.append(name)
+    return out
 
 
 def trust_entry(doc: dict[str, Any]) -> dict[str, Any]:

@@ -334,7 +334,7 @@ class JointSlam:
         system) is left out."""
         scale = 1.0
         if self.noise is not None:
-            scale = (self.noise.sigma_rad / self.sigma_model_rad) ** 2
+            scale = self.noise.variance_rad2 / self.sigma_model_rad**2
         out = {}
         for k in sorted(self._placed):
             for end in (0, 1):
@@ -884,15 +884,15 @@ class JointSlam:
 
     def _update_estimates(self) -> None:
         r = self._residuals()
-        self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
+        self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad, self.eps_rad)
         n = self.noise
         off = abs(math.log(n.sigma_rad / self.sigma_model_rad))
         if n.dof >= RETUNE_DOF and off > math.log(RETUNE_RATIO):
             self.sigma_model_rad = n.sigma_rad
             self._rebuild(self._values)
             r = self._residuals()
-            self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad)
-        scale = (self.noise.sigma_rad / self.sigma_model_rad) ** 2
+            self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad, self.eps_rad)
+        scale = self.noise.variance_rad2 / self.sigma_model_rad**2
         out = {}
         for name in sorted(self._in_graph - set(self.reference), key=self._lm_index.__getitem__):
             cov = np.asarray(self._isam.marginalCovariance(self._key(name)), np.float64) * scale

@@ -1,10 +1,19 @@
 """The bearing noise of a map, estimated from its residuals.
 
+Point estimate (the noise model of the graph, the Huber threshold, association's predictions):
 ``sigma^2 = (sum_inliers r^2 + NU0 sigma0^2) / (dof + NU0)``: the residual variance with the
 degrees of freedom the fit used up, shrunk towards the prior guess ``sigma0`` by ``NU0`` pseudo
 observations (so a map with hardly any redundancy keeps the prior guess). Inliers: residuals
 within :data:`OUTLIER_K` robust standard deviations (1.4826 x median absolute residual, floored at
 :data:`FLOOR_RAD`) of zero.
+
+What the covariances are scaled by: the posterior mean of ``sigma^2`` (:func:`posterior_variance`)
+with a log-uniform prior on ``sigma`` between :data:`FLOOR_RAD` and the bearing error bound eps
+(an error bounded by eps has a std of at most eps; log-uniform: no scale preferred). Each
+landmark's covariance is then the covariance of its posterior with the noise scale unknown (a
+Student-t, which a Gaussian of the same covariance stands for): with few degrees of freedom it is
+wider than the point estimate's (``sum r^2 / (dof - 2)`` rather than ``/ dof``), and no prior guess
+pulls a map of precise bearings towards eps.
 """
 
 from __future__ import annotations
@@ -21,12 +30,32 @@ NU0 = 0.5
 OUTLIER_K = 4.0
 #: Smallest noise the estimate reports (rad): 0.02 deg.
 FLOOR_RAD = math.radians(0.02)
+#: Points of the grid in log sigma on which the posterior of sigma is summed.
+POSTERIOR_GRID = 2000
 
 
 def robust_std(residuals_rad: NDArray[np.float64]) -> float:
     """Robust standard deviation of residuals (k,): 1.4826 x their median absolute value (the
     std of a Gaussian with that median; wrong detections barely move it)."""
     return 1.4826 * float(np.median(np.abs(residuals_rad)))
+
+
+def posterior_variance(ssr_rad2: float, dof: int, bound_rad: float) -> float:
+    """Posterior mean of ``sigma^2`` (rad^2) given ``dof`` degrees of freedom of residuals whose
+    squares sum to ``ssr_rad2``, under a log-uniform prior on ``sigma`` in
+    [:data:`FLOOR_RAD`, ``bound_rad``].
+
+    The likelihood of ``sigma``, the map's unknowns integrated out (flat priors, linearized), is
+    ``sigma^-dof exp(-ssr / (2 sigma^2))``; in ``u = log sigma`` the prior is flat, so the
+    posterior is that likelihood, summed on a grid of ``u`` (:data:`POSTERIOR_GRID` points,
+    trapezoidal rule).
+    """
+    lo, hi = math.log(FLOOR_RAD), math.log(max(bound_rad, FLOOR_RAD * 1.001))
+    u = np.linspace(lo, hi, POSTERIOR_GRID)
+    log_w = -max(dof, 0) * u - 0.5 * max(ssr_rad2, 0.0) * np.exp(-2.0 * u)
+    w = np.exp(log_w - log_w.max())
+    w[[0, -1]] *= 0.5  # the trapezoidal rule
+    return float((w * np.exp(2.0 * u)).sum() / w.sum())
 
 
 @dataclass(frozen=True)
@@ -47,6 +76,9 @@ class NoiseEstimate:
         Residuals left out as wrong detections.
     dof : int
         Bearings minus free parameters (negative: not enough redundancy yet).
+    variance_rad2 : float
+        Posterior mean of the noise variance (:func:`posterior_variance`; ``sigma_rad ** 2``
+        when no bound was given): what covariances are scaled by.
     """
 
     sigma_rad: float
@@ -55,25 +87,33 @@ class NoiseEstimate:
     n_bearings: int
     n_outliers: int
     dof: int
+    variance_rad2: float
 
 
 def estimate_noise(
-    residuals_rad: NDArray[np.float64], n_params: int, sigma0_rad: float
+    residuals_rad: NDArray[np.float64],
+    n_params: int,
+    sigma0_rad: float,
+    bound_rad: float | None = None,
 ) -> NoiseEstimate:
-    """Noise estimate from the bearing residuals (k,) of a fit with ``n_params`` free parameters."""
+    """Noise estimate from the bearing residuals (k,) of a fit with ``n_params`` free parameters;
+    ``bound_rad``: the bearing error bound eps, for :attr:`NoiseEstimate.variance_rad2`."""
     r = np.asarray(residuals_rad, np.float64)
     if r.size == 0:
-        return NoiseEstimate(sigma0_rad, 0.0, 0.0, 0, 0, -n_params)
+        var0 = sigma0_rad**2 if bound_rad is None else posterior_variance(0.0, 0, bound_rad)
+        return NoiseEstimate(sigma0_rad, 0.0, 0.0, 0, 0, -n_params, var0)
     robust = max(robust_std(r), FLOOR_RAD)
     inlier = np.abs(r) <= OUTLIER_K * max(robust, sigma0_rad * 0.25)
     ssr = float((r[inlier] ** 2).sum())
     dof = int(inlier.sum()) - n_params
     var = (ssr + NU0 * sigma0_rad**2) / (max(dof, 0) + NU0)
+    sigma = max(math.sqrt(var), FLOOR_RAD)
     return NoiseEstimate(
-        max(math.sqrt(var), FLOOR_RAD),
+        sigma,
         robust,
         float(np.sqrt(np.mean(r**2))),
         int(r.size),
         int((~inlier).sum()),
         dof,
+        sigma**2 if bound_rad is None else posterior_variance(ssr, dof, bound_rad),
     )

@@ -13,12 +13,14 @@ import math
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from data_schemas.errors import EstimationError
 from pipeline.batch_ls import batch_least_squares
 from pipeline.estimators import DEFAULT_DISTANCE_PRIOR_REL, make_estimator
+from pipeline.slam import MovementObservation
 from replay.experiments.families import family_scenario
 from replay.experiments.methods import observations_from_summary
 from replay.experiments.run import read_log_plan, simulate
@@ -56,14 +58,15 @@ class LandmarkScore:
         return self.d2 <= CHI2_2_LEVEL
 
 
-def score_run(family: str, seed: int, folder: Path | None = None) -> list[LandmarkScore]:
-    """Simulate, process and score one run of ``family`` drawn from ``seed``."""
+def observe_run(family: str, seed: int) -> tuple[dict[str, Any], list[MovementObservation]]:
+    """Simulate and process one run of ``family`` drawn from ``seed``: its scenario and the
+    keyframe bearings of every movement, with the commanded turn and driven distance."""
     from replay.process import process_log
     from replay.records import MethodConfig
 
     doc = family_scenario(family, seed)
     with tempfile.TemporaryDirectory() as tmp:
-        log = Path(folder or tmp) / f"{family}_{seed}.mcap"
+        log = Path(tmp) / f"{family}_{seed}.mcap"
         simulate(doc, log, seed=seed)
         summary = process_log(log, MethodConfig(seed=seed, estimator="paper"))
         plan = read_log_plan(log)
@@ -71,6 +74,13 @@ def score_run(family: str, seed: int, folder: Path | None = None) -> list[Landma
         replace(o, turn_rad=plan.turns_rad.get(o.index), distance_m=plan.distances_m.get(o.index))
         for o in observations_from_summary(summary)
     ]
+    return doc, observations
+
+
+def score_observations(
+    doc: dict[str, Any], observations: list[MovementObservation], family: str, seed: int
+) -> list[LandmarkScore]:
+    """Run the joint estimator and batch least squares on a run's bearings; score its final map."""
     reference = (doc["reference"][0], doc["reference"][1])
     truth = truth_from_scenario(doc, reference)
     truth_fl, scale_cm = truth.landmarks_fl(), 100.0 * truth.to_fl.unit_m
@@ -83,26 +93,29 @@ def score_run(family: str, seed: int, folder: Path | None = None) -> list[Landma
         rng=np.random.default_rng(seed),
         distance_prior_rel=DEFAULT_DISTANCE_PRIOR_REL,
     )
-    result = None
     for obs in observations:
-        result = slam.process_movement(obs)
+        slam.process_movement(obs)
     try:
         ls = batch_least_squares(observations, names, reference)
     except EstimationError:
         ls = {}
-    out = []
-    noise = getattr(result, "noise", None)
+    noise = getattr(slam, "noise", None)
     sigma_deg = math.degrees(noise.sigma_rad) if noise is not None else math.nan
-    for name, est in (result.estimates if result is not None else {}).items():
+    out = []
+    for name, est in slam.estimates.items():
         d = est.mean_fl - truth_fl[name]
         cov = np.asarray(est.cov_fl, np.float64)
         d2 = float(d @ np.linalg.solve(cov, d)) if np.linalg.det(cov) > 0.0 else math.inf
         b = ls.get(name)
         ls_cm = math.nan if b is None else scale_cm * float(np.hypot(*(b - truth_fl[name])))
-        out.append(
-            LandmarkScore(family, seed, name, scale_cm * float(np.hypot(*d)), ls_cm, d2, sigma_deg)
-        )
+        error_cm = scale_cm * float(np.hypot(*d))
+        out.append(LandmarkScore(family, seed, name, error_cm, ls_cm, d2, sigma_deg))
     return out
+
+
+def score_run(family: str, seed: int) -> list[LandmarkScore]:
+    """Simulate, process and score one run of ``family`` drawn from ``seed``."""
+    return score_observations(*observe_run(family, seed), family, seed)
 
 
 def coverage(scores: list[LandmarkScore]) -> float:

@@ -17,7 +17,7 @@ from pipeline.batch_ls import batch_least_squares
 from pipeline.estimators import make_estimator
 from pipeline.joint.estimator import JointSlam
 from pipeline.joint.geometry import Sightings, intersect_rays, resect
-from pipeline.joint.noise import estimate_noise
+from pipeline.joint.noise import FLOOR_RAD, estimate_noise, posterior_variance
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import (
     PAPER_REFERENCE,
@@ -382,6 +382,28 @@ def test_noise_estimate_leaves_out_wrong_detections_and_counts_freedom() -> None
     assert est.n_outliers == 3 and est.dof == 397 - 40
     assert est.sigma_rad == pytest.approx(0.01 * math.sqrt(397 / 357), rel=0.1)
     assert estimate_noise(np.zeros(0), 4, 0.02).sigma_rad == 0.02
+
+
+def test_noise_variance_for_covariances_is_its_posterior_mean() -> None:
+    # with the prior's bounds far from the data, the posterior of sigma^2 under a log-uniform
+    # prior on sigma is an inverse gamma (shape dof / 2, scale ssr / 2): mean ssr / (dof - 2)
+    for ssr, dof in ((0.01**2 * 30, 30), (0.003**2 * 8, 8), (1e-4 * 200, 200)):
+        assert posterior_variance(ssr, dof, bound_rad=1.0) == pytest.approx(
+            ssr / (dof - 2), rel=1e-3
+        )
+    # no residuals: the prior's own mean of sigma^2, (b^2 - a^2) / (2 ln(b / a))
+    a, b = FLOOR_RAD, EPS
+    assert posterior_variance(0.0, 0, EPS) == pytest.approx(
+        (b**2 - a**2) / (2.0 * math.log(b / a)), rel=1e-3
+    )
+    # residuals far wider than the bound: the posterior piles up at the bound
+    assert math.sqrt(posterior_variance(0.1**2 * 50, 50, EPS)) == pytest.approx(EPS, rel=0.01)
+    # through the estimate: the inliers' sum of squares and the degrees of freedom
+    rng = np.random.default_rng(1)
+    r = rng.normal(0.0, 0.01, 60)
+    est = estimate_noise(r, n_params=20, sigma0_rad=0.02, bound_rad=EPS)
+    assert est.variance_rad2 == pytest.approx(float((r**2).sum()) / (60 - 20 - 2), rel=1e-3)
+    assert estimate_noise(r, n_params=20, sigma0_rad=0.02).variance_rad2 == est.sigma_rad**2
 
 
 def _with_distances(run: SimulatedRun, rel_noise: float, rng: np.random.Generator) -> SimulatedRun:

@@ -11,7 +11,7 @@ from replay.trust import trust_entry, trust_reasons
 def _doc(statuses: list[str], association: dict[str, Any] | None = None) -> dict[str, Any]:
     doc: dict[str, Any] = {
         "movements": [{"index": k, "status": s} for k, s in enumerate(statuses)],
-        "landmarks": {"L3": {}},
+        "landmarks": {"L3": {"mean": [0.5, 0.5]}},
     }
     if association is not None:
         doc["association"] = association
@@ -24,6 +24,18 @@ def test_a_map_nothing_doubts_is_trustworthy() -> None:
     assert trust_entry(doc) == {"trustworthy": True}
     doc["trust"] = trust_entry(doc)
     assert "NOT trustworthy" not in result_line(doc)
+
+
+def test_a_map_collapsed_onto_the_robot_is_not_trustworthy() -> None:
+    doc = _doc(["ok"] * 3)
+    doc["landmarks"] = {"L3": {"mean": [0.0, 0.0]}, "L4": {"mean": [0.3, 0.5]}}
+    doc["movements"][2]["observation_points"] = {"o1": [0.3, 0.494], "o2": [0.8, 0.8]}
+    assert trust_reasons(doc) == []  # 0.006 FL from a keyframe: near it, not on it
+    doc["movements"][1]["observation_points"] = {"o1": [0.001, -0.002], "o2": [0.0, 0.0]}
+    doc["movements"][2]["observation_points"] = {"o1": [0.3, 0.498], "o2": [0.8, 0.8]}
+    assert trust_reasons(doc) == [
+        "the map collapsed: L3, L4 where the robot stood (a degenerate fit)"
+    ]
 
 
 def test_each_sign_of_a_wrong_map_is_a_reason() -> None:
