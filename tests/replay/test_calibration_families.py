@@ -22,7 +22,7 @@ from replay.experiments.families import FAMILIES
 SEEDS = {
     "paper": range(20),
     "paper_noise_free": range(20),
-    "noise_free": range(14),
+    "noise_free": range(16),
     "long": range(10),
     "close_pairs": range(7),
     "coded": range(7),
