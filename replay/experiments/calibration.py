@@ -19,8 +19,9 @@ import numpy as np
 
 from data_schemas.errors import EstimationError
 from pipeline.batch_ls import batch_least_squares
-from pipeline.estimators import DEFAULT_DISTANCE_PRIOR_REL, make_estimator
+from pipeline.estimators import make_estimator
 from pipeline.slam import MovementObservation
+from replay import defaults
 from replay.experiments.families import family_scenario
 from replay.experiments.methods import observations_from_summary
 from replay.experiments.run import read_log_plan, simulate
@@ -91,7 +92,11 @@ def score_observations(
         reference,
         vision_error_rad=math.radians(float(doc["vision_error_deg"])),
         rng=np.random.default_rng(seed),
-        distance_prior_rel=DEFAULT_DISTANCE_PRIOR_REL,
+        prior="impartial",
+        n_r=defaults.N_R,
+        n_l=defaults.N_L,
+        turn_prior_sigma_rad=None,
+        distance_prior_rel=defaults.DISTANCE_PRIOR_REL,
     )
     for obs in observations:
         slam.process_movement(obs)
