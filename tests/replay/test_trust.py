@@ -10,6 +10,7 @@ from replay.trust import trust_entry, trust_reasons
 
 def _doc(statuses: list[str], association: dict[str, Any] | None = None) -> dict[str, Any]:
     doc: dict[str, Any] = {
+        "frame": {"origin": "L1", "x_axis": "L2"},
         "movements": [{"index": k, "status": s} for k, s in enumerate(statuses)],
         "landmarks": {"L3": {"mean": [0.5, 0.5]}},
     }
