@@ -171,6 +171,11 @@ class OpenCVCamera:
         self.frames_read += 1
         return image
 
+    def video_time_ms(self) -> float:
+        """The time of the frame just read, ms from the video's start (a video file's own frame
+        times, ``CAP_PROP_POS_MSEC``; other sources give 0 or a meaningless value)."""
+        return float(self._capture.get(cv2.CAP_PROP_POS_MSEC))
+
     def close(self) -> None:
         """Release the capture (idempotent)."""
         self._capture.release()

@@ -129,6 +129,12 @@ class _SignalFlag:
 _FLAG = _SignalFlag()
 
 
+def check_stop() -> None:
+    """Raise :class:`RecordingInterrupted` if a stop signal came (inside
+    :func:`stop_on_signals`): a safe point of a recording loop."""
+    _FLAG.check()
+
+
 @contextlib.contextmanager
 def stop_on_signals(
     signums: Iterable[int] = (signal.SIGINT, signal.SIGTERM),

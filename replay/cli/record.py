@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from typing import TYPE_CHECKING
 
 import click
@@ -34,7 +35,18 @@ def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tu
 
 
 @click.command("record")
-@click.option("--port", required=True, help="Serial port of the robot (/dev/ttyUSB0) or URL.")
+@click.option("--port", help="Serial port of the robot (/dev/ttyUSB0) or URL.")
+@click.option(
+    "--no-robot",
+    is_flag=True,
+    help="No robot: record every frame of --camera (and --odometry) as they come.",
+)
+@click.option(
+    "--odometry",
+    type=click.Path(dir_okay=False),
+    help="With --no-robot: odometry CSV, as for `bslam import csv` (poses or velocities) "
+    "[default: none].",
+)
 @click.option(
     "--camera", "camera_source", required=True, help="Device index, URL, video, or frames_%04d.png."
 )
@@ -100,7 +112,9 @@ def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tu
 )
 @live_options
 def record(
-    port: str,
+    port: str | None,
+    no_robot: bool,
+    odometry: str | None,
     camera_source: str,
     out: str,
     calibration: str,
@@ -125,6 +139,9 @@ def record(
 ) -> None:
     """Record a session: turn, keyframe, drive while capturing, keyframe; MOVES times.
 
+    With --no-robot instead of --port: every frame of --camera (a video's own frame times, an
+    image sequence at --rate, a live camera's capture clock), and the poses of --odometry.
+
     Ctrl-C (or SIGTERM) stops the motors and finishes the log cleanly (exit 130 / 143).
     """
     from recorder.record import RecordSettings
@@ -132,6 +149,36 @@ def record(
     from replay.cli.recording import live_view, run_recording
 
     view = live_view(live, spawn, connect, save_rrd)
+    if no_robot == (port is not None):
+        raise click.UsageError("give --port (a robot) or --no-robot (a camera source alone)")
+    if odometry is not None and not no_robot:
+        raise click.UsageError("--odometry is for --no-robot (a robot's odometry is recorded)")
+    if no_robot:
+        from pathlib import Path
+
+        from replay.importers.camera_only import CameraOnlySpec, record_camera_only
+
+        only = CameraOnlySpec(
+            camera_source=camera_source,
+            calibration_file=Path(calibration),
+            landmark_file=Path(landmarks),
+            odometry_file=None if odometry is None else Path(odometry),
+            rate_hz=frame_rate_hz,
+            encoding=encoding,
+            png_level=png_level,
+            chunk_compression="" if chunk_compression == "none" else chunk_compression,
+        )
+        inputs = [calibration, landmarks, *([odometry] if odometry else [])]
+        run_recording(
+            out,
+            lambda path, progress: record_camera_only(path, only, progress=progress),
+            total=None,
+            force=force,
+            inputs=[*inputs, *([camera_source] if os.path.isfile(camera_source) else [])],
+            live=view,
+        )
+        return
+    assert port is not None
 
     spec = RobotSessionSpec(
         port=port,
