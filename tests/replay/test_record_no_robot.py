@@ -6,6 +6,8 @@ from __future__ import annotations
 import base64
 import json
 import math
+import os
+import signal
 from pathlib import Path
 from typing import Any
 
@@ -14,10 +16,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from importing import on, read_back
+from mcap.reader import make_reader
 
+from recorder.record import Progress, RecordingInterrupted
 from recorder.sim.scenario import simulated_pinhole
 from replay.cli import cli
 from replay.drive_sim import DriveCamera, simulate_drive_log
+from replay.importers.camera_only import CameraOnlySpec, record_camera_only
 
 PERIOD_S = 0.2  # the simulated camera's frame period: 5 frames per second
 
@@ -155,3 +160,28 @@ def test_an_image_sequence_is_recorded_at_the_rate_given(drive: dict[str, Any]) 
         got = cv2.imdecode(np.frombuffer(base64.b64decode(f["data"]), np.uint8), -1)
         assert np.array_equal(got, expected)
     assert not on(messages, "/robot/odometry_pose")
+
+
+def test_a_stop_signal_finishes_and_indexes_the_log(drive: dict[str, Any]) -> None:
+    """SIGINT after the 10th frame: the next frame is not read, the log is indexed with 10."""
+    folder = drive["folder"]
+    spec = CameraOnlySpec(
+        str(folder / "drive.avi"), folder / "cal.json", folder / "lm.json", None, rate_hz=5.0
+    )
+
+    def stop_at_ten(p: Progress) -> None:
+        if p.frames == 10:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    out = folder / "stopped.mcap"
+    with pytest.raises(RecordingInterrupted):
+        record_camera_only(out, spec, progress=stop_at_ten)
+    with out.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        counts = {
+            summary.channels[c].topic: n
+            for c, n in summary.statistics.channel_message_counts.items()
+        }
+    assert counts["/camera/panorama"] == 10 < len(drive["frames"])
