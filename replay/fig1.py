@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cache
 
 import cv2
 import numpy as np
@@ -50,11 +51,16 @@ class Fig1:
     marginals: dict[str, NDArray[np.float64]]
 
 
+@cache
 def fig1_data(
     eps_rad: float, *, nx: int = WIDTH, ny: int = HEIGHT, nr: int = 60, bearing_rad: float = 0.0
 ) -> Fig1:
     """Compute Fig. 1 (every prior, the cone of ``eps_rad`` around ``bearing_rad``); ``ys``
-    runs from +y to -y, as image rows do."""
+    runs from +y to -y, as image rows do.
+
+    Cached per arguments (one figure per log's eps, however many recordings a process makes);
+    the arrays are shared, read-only.
+    """
     half = R_MAX * math.tan(1.6 * eps_rad)
     xs = np.linspace(0.0, R_MAX, nx)
     ys = np.linspace(half, -half, ny)
@@ -66,6 +72,8 @@ def fig1_data(
         densities[name] = prior_density_grid(name, bearing_rad, eps_rad, R_MIN, R_MAX, xs, ys)
         prior = make_prior(name, eps_rad, R_MIN, R_MAX)
         marginals[name] = range_marginal(prior, r, bearing_rad, n_angle=N_ANGLE)
+    for a in (xs, ys, r, *densities.values(), *marginals.values()):
+        a.flags.writeable = False
     return Fig1(xs, ys, densities, r, marginals)
 
 

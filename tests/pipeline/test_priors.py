@@ -191,3 +191,16 @@ def test_angular_density_and_its_draws_against_the_truncated_normal() -> None:
     assert float(flat.sample_angle(200_000, np.random.default_rng(42)).std()) == pytest.approx(
         eps / math.sqrt(3.0), rel=0.01
     )
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 64, 2048])
+def test_gauss_legendre_matches_scipy(n: int) -> None:
+    """Our Newton nodes and weights against scipy's Golub-Welsch (an independent method)."""
+    from scipy.special import roots_legendre
+
+    from pipeline.priors import _gauss_legendre
+
+    x, w = _gauss_legendre(n)
+    x_ref, w_ref = roots_legendre(n)
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(w, w_ref, rtol=0, atol=1e-12)
