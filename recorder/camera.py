@@ -161,13 +161,7 @@ class OpenCVCamera:
                 f"camera source {self.source} ended after {self.frames_read} frames"
             )
         image = _to_bgr(np.asarray(frame))
-        height, width = image.shape[:2]
-        cal = self._calibration
-        if (width, height) != (cal.width, cal.height):
-            raise ImageError(
-                f"camera {self.source} delivers {width}x{height} frames but the calibration is "
-                f"for {cal.width}x{cal.height}; use the calibration made for this camera"
-            )
+        _check_size(image, self.source, self._calibration)
         self.frames_read += 1
         return image
 
@@ -179,6 +173,84 @@ class OpenCVCamera:
     def close(self) -> None:
         """Release the capture (idempotent)."""
         self._capture.release()
+
+
+#: File names a :class:`FolderCamera` reads (lower case), the image formats OpenCV reads.
+IMAGE_SUFFIXES = frozenset(
+    {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp"}
+)
+
+
+class FolderCamera:
+    """The images of a folder in name order (other files ignored): a finite source.
+
+    Parameters
+    ----------
+    folder : str
+        The folder.
+    calibration : Calibration
+        Calibration of the images; their size must match it.
+
+    Raises
+    ------
+    CameraError
+        The folder holds no image.
+    """
+
+    kind = "folder"
+
+    def __init__(self, folder: str, calibration: Calibration) -> None:
+        self.source = folder
+        self._calibration = calibration
+        self._paths = sorted(
+            os.path.join(folder, name)
+            for name in os.listdir(folder)
+            if os.path.splitext(name)[1].lower() in IMAGE_SUFFIXES
+        )
+        if not self._paths:
+            raise CameraError(
+                f"camera folder {folder} holds no image ({', '.join(sorted(IMAGE_SUFFIXES))})"
+            )
+        self.frames_read = 0
+
+    @property
+    def calibration(self) -> Calibration:
+        """Calibration of the images."""
+        return self._calibration
+
+    def read(self) -> NDArray[np.uint8]:
+        """The next image, BGR uint8 ``(H, W, 3)`` (greyscale as three equal channels).
+
+        Raises
+        ------
+        CameraEndOfStream
+            Every image has been read.
+        ImageError
+            An image OpenCV cannot read, or of a size other than the calibration's.
+        """
+        if self.frames_read == len(self._paths):
+            raise CameraEndOfStream(f"camera folder {self.source} ended after {self.frames_read}")
+        path = self._paths[self.frames_read]
+        image = cv2.imread(path, cv2.IMREAD_COLOR)
+        if image is None:
+            raise ImageError(f"image {path} cannot be read (not an image OpenCV reads)")
+        bgr = _to_bgr(np.asarray(image))
+        _check_size(bgr, path, self._calibration)
+        self.frames_read += 1
+        return bgr
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+def _check_size(image: NDArray[np.uint8], source: str, cal: Calibration) -> None:
+    """Raise :class:`ImageError` unless ``image`` has the calibration's size."""
+    height, width = image.shape[:2]
+    if (width, height) != (cal.width, cal.height):
+        raise ImageError(
+            f"camera {source} delivers {width}x{height} frames but the calibration is "
+            f"for {cal.width}x{cal.height}; use the calibration made for this camera"
+        )
 
 
 def _to_bgr(frame: NDArray[Any]) -> NDArray[np.uint8]:

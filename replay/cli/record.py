@@ -48,7 +48,10 @@ def _distance_range(ctx: click.Context, param: click.Parameter, text: str) -> tu
     "[default: none].",
 )
 @click.option(
-    "--camera", "camera_source", required=True, help="Device index, URL, video, or frames_%04d.png."
+    "--camera",
+    "camera_source",
+    required=True,
+    help="Device index, URL, video, frames_%04d.png, or (--no-robot) a folder of images.",
 )
 @click.option("--out", required=True, type=click.Path(dir_okay=False), help="Log to write (.mcap).")
 @click.option(

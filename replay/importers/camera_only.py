@@ -1,7 +1,8 @@
 """``bslam record --no-robot``: every frame of a camera source, and odometry from a CSV, into a log.
 
 No robot is driven: the frames come from a video file, an image-sequence pattern or a live
-source (device index, URL) through :class:`recorder.camera.OpenCVCamera`, and the odometry (if
+source (device index, URL) through :class:`recorder.camera.OpenCVCamera`, or from a folder's
+images in name order (:class:`recorder.camera.FolderCamera`), and the odometry (if
 any) from the CSV importer's odometry file (:func:`replay.importers.csv_files.read_odometry`,
 poses or velocities). A log with frames and ``/robot/odometry_pose`` and no ``/robot/movement``
 is processed by the driving path (docs/design.md).
@@ -9,7 +10,7 @@ is processed by the driving path (docs/design.md).
 Frame times, seconds from the source's start (the odometry CSV's ``t_s`` are in the same time):
 
 * a video file: its own frame times (``CAP_PROP_POS_MSEC``); they must increase;
-* an image sequence: frame ``i`` at ``i / rate_hz`` (images carry no times);
+* an image sequence or a folder: frame ``i`` at ``i / rate_hz`` (images carry no times);
 * a live source: the capture clock, from the first frame.
 
 The log is written as it grows, as ``bslam record`` writes it: a stop signal (Ctrl-C, SIGTERM)
@@ -28,7 +29,7 @@ from pathlib import Path
 from data_schemas.errors import CameraError
 from data_schemas.mcap.writer import LogWriter, SettableClock
 from data_schemas.registry import CAMERA_TOPIC, ImageEncoding
-from recorder.camera import CameraEndOfStream, OpenCVCamera
+from recorder.camera import CameraEndOfStream, FolderCamera, OpenCVCamera
 from recorder.frames import frame_message
 from recorder.record import Progress, RecordResult, check_stop, stop_on_signals
 from recorder.session import landmark_entry, load_calibration_file, load_landmark_file
@@ -48,13 +49,14 @@ class CameraOnlySpec:
     Attributes
     ----------
     camera_source : str
-        Video file, image-sequence pattern (``frames_%04d.png``), device index or URL.
+        Video file, image-sequence pattern (``frames_%04d.png``), folder of images, device
+        index or URL.
     calibration_file, landmark_file : Path
         As for ``bslam record``.
     odometry_file : Path or None
         Odometry CSV (``t_s,x_m,y_m,theta_rad`` or ``t_s,v_mps,omega_radps``), or none.
     rate_hz : float
-        Frame rate of an image sequence (its frames carry no times), frames per second.
+        Frame rate of an image sequence or folder (images carry no times), frames per second.
     encoding : {"png", "bgr8"}
         Frame storage.
     png_level : int
@@ -103,7 +105,11 @@ def record_camera_only(
         odometry = read_odometry(spec.odometry_file)
     calibration = load_calibration_file(spec.calibration_file)
     catalog = load_landmark_file(spec.landmark_file)
-    camera = OpenCVCamera(spec.camera_source, calibration)
+    camera: FolderCamera | OpenCVCamera
+    if os.path.isdir(spec.camera_source):
+        camera = FolderCamera(spec.camera_source, calibration)
+    else:
+        camera = OpenCVCamera(spec.camera_source, calibration)
     doc = imported_session(
         kind="camera",
         importer_version=CAMERA_ONLY_VERSION,
@@ -137,9 +143,9 @@ def record_camera_only(
                     image = camera.read()
                 except CameraEndOfStream:
                     break
-                if camera.kind == "file":
+                if isinstance(camera, OpenCVCamera) and camera.kind == "file":
                     t_ns = round(camera.video_time_ms() * 1e6)
-                elif camera.kind == "sequence":
+                elif camera.kind in ("sequence", "folder"):
                     t_ns = round(frames / spec.rate_hz * 1e9)
                 else:
                     now_s = time.monotonic()

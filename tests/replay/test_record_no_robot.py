@@ -185,3 +185,76 @@ def test_a_stop_signal_finishes_and_indexes_the_log(drive: dict[str, Any]) -> No
             for c, n in summary.statistics.channel_message_counts.items()
         }
     assert counts["/camera/panorama"] == 10 < len(drive["frames"])
+
+
+def test_the_video_the_folder_of_its_frames_and_import_images_map_alike(
+    drive: dict[str, Any],
+) -> None:
+    """The video's frames decoded by OpenCV into a folder (name order not numeric order on
+    purpose, and a file that is not an image): ``record --no-robot`` of the folder at 5 frames
+    per second stores the same frames at the same times, and ``bslam import images`` of the folder
+    with its timestamps maps as the video's recording does."""
+    folder = drive["folder"]
+    images = folder / "decoded"
+    images.mkdir()
+    (images / "notes.txt").write_text("not an image\n")
+    capture = cv2.VideoCapture(str(folder / "drive.avi"))
+    names = []
+    while True:
+        ok, image = capture.read()
+        if not ok:
+            break
+        names.append(f"f{len(names):04d}.png")
+        cv2.imwrite(str(images / names[-1]), image)
+    (folder / "times.csv").write_text(
+        "file,t_s\n" + "".join(f"{n},{k * PERIOD_S:.1f}\n" for k, n in enumerate(names))
+    )
+    common = ["--calibration", str(folder / "cal.json"), "--landmarks", str(folder / "lm.json")]
+    odometry = ["--odometry", str(folder / "odo.csv")]
+    runs = {
+        "video": ["record", "--no-robot", "--camera", str(folder / "drive.avi")],
+        "folder": ["record", "--no-robot", "--camera", str(images), "--rate", "5"],
+        "import": ["import", "images", str(images), "--timestamps", str(folder / "times.csv")],
+    }
+    maps = {}
+    logs = {}
+    for name, args in runs.items():
+        out = folder / f"alike_{name}.mcap"
+        result = CliRunner().invoke(cli, [*args, *common, *odometry, "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        logs[name] = read_back(out)[1]
+        summary = folder / f"alike_{name}.json"
+        assert (
+            CliRunner().invoke(cli, ["process", str(out), "--summary", str(summary)]).exit_code == 0
+        )
+        maps[name] = json.loads(summary.read_text())["landmarks"]
+    frames = {n: on(m, "/camera/panorama") for n, m in logs.items()}
+    assert len(frames["video"]) == len(names)
+    for a, b in zip(frames["video"], frames["folder"], strict=True):
+        assert a["timestamp"] == b["timestamp"] and a["data"] == b["data"]
+    for a, b in zip(frames["video"], frames["import"], strict=True):
+        assert a["timestamp"] == b["timestamp"]
+        assert np.array_equal(
+            cv2.imdecode(np.frombuffer(base64.b64decode(a["data"]), np.uint8), -1),
+            cv2.imdecode(np.frombuffer(base64.b64decode(b["data"]), np.uint8), -1),
+        )
+    assert maps["video"] == maps["folder"] == maps["import"]
+    truth = {t["name"] for t in drive["session"]["truth"]["landmarks"]}
+    assert set(maps["video"]) == truth - {"L1", "L2"}
+
+
+def test_a_folder_without_images_or_with_a_bad_one_is_one_line(drive: dict[str, Any]) -> None:
+    folder = drive["folder"]
+    empty = folder / "empty"
+    empty.mkdir()
+    args = _record(folder, "--out", str(folder / "e.mcap"))
+    args[args.index("--camera") + 1] = str(empty)
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1 and result.output.startswith("Error: camera folder ")
+    assert "holds no image" in result.output and not (folder / "e.mcap").exists()
+    (empty / "a.png").write_bytes(base64.b64decode(drive["frames"][0]["data"]))
+    (empty / "b.png").write_text("not a PNG")
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1 and "b.png cannot be read" in result.output
+    _, messages = read_back(folder / "e.mcap")  # the frame before it is kept, indexed
+    assert len(on(messages, "/camera/panorama")) == 1
