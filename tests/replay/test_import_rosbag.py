@@ -18,11 +18,10 @@ from importing import on, read_back
 
 from replay.cli import cli
 
-rosbags_typesys = pytest.importorskip("rosbags.typesys")
-from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
+pytest.importorskip("rosbags.typesys")
+from ros_messages import TS, T, camera_info, header, odometry
+from rosbags.rosbag2 import StoragePlugin, Writer
 
-TS = rosbags_typesys.get_typestore(rosbags_typesys.Stores.ROS2_HUMBLE)
-T = TS.types
 W, H = 8, 6
 K = [5.0, 0.0, 4.0, 0.0, 5.5, 3.0, 0.0, 0.0, 1.0]
 D = [0.1, -0.01, 0.0, 0.0, 0.0]
@@ -33,17 +32,12 @@ LANDMARKS = {
 }
 
 
-def _header(t_ns: int, frame: str = "camera") -> Any:
-    stamp = T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
-    return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
-
-
 def _image(t_ns: int, bgr: np.ndarray, encoding: str) -> Any:
     if encoding == "png":
         ok, png = cv2.imencode(".png", bgr)
         assert ok
         return T["sensor_msgs/msg/CompressedImage"](
-            header=_header(t_ns), format="png", data=png.ravel()
+            header=header(t_ns, "camera"), format="png", data=png.ravel()
         )
     pixels = {
         "bgr8": bgr,
@@ -53,35 +47,9 @@ def _image(t_ns: int, bgr: np.ndarray, encoding: str) -> Any:
     }[encoding]
     channels = 1 if pixels.ndim == 2 else pixels.shape[2]
     return T["sensor_msgs/msg/Image"](
-        header=_header(t_ns), height=H, width=W, encoding=encoding, is_bigendian=0,
+        header=header(t_ns, "camera"), height=H, width=W, encoding=encoding, is_bigendian=0,
         step=W * channels, data=np.ascontiguousarray(pixels).ravel(),
     )  # fmt: skip
-
-
-def _camera_info(t_ns: int) -> Any:
-    roi = T["sensor_msgs/msg/RegionOfInterest"](
-        x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
-    )
-    return T["sensor_msgs/msg/CameraInfo"](
-        header=_header(t_ns), height=H, width=W, distortion_model="plumb_bob",
-        d=np.array(D), k=np.array(K), r=np.eye(3).ravel(), p=np.zeros(12),
-        binning_x=0, binning_y=0, roi=roi,
-    )  # fmt: skip
-
-
-def _odometry(t_ns: int, x: float, y: float, yaw: float) -> Any:
-    point = T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0)
-    q = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
-    pose = T["geometry_msgs/msg/PoseWithCovariance"](
-        pose=T["geometry_msgs/msg/Pose"](position=point, orientation=q), covariance=np.zeros(36)
-    )
-    zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
-    twist = T["geometry_msgs/msg/TwistWithCovariance"](
-        twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=np.zeros(36)
-    )
-    return T["nav_msgs/msg/Odometry"](
-        header=_header(t_ns, "odom"), child_frame_id="base_link", pose=pose, twist=twist
-    )
 
 
 FRAMES_NS = [1_000_000_000, 1_100_000_001, 1_200_000_002]
@@ -104,7 +72,9 @@ def _bag(tmp_path: Path, storage: StoragePlugin, encoding: str, frames: list[np.
         w.write(
             info,
             950_000_000,
-            TS.serialize_cdr(_camera_info(950_000_000), "sensor_msgs/msg/CameraInfo"),
+            TS.serialize_cdr(
+                camera_info(950_000_000, "camera", W, H, K, D), "sensor_msgs/msg/CameraInfo"
+            ),
         )
         stream = sorted(
             [(t, "img", i) for i, t in enumerate(FRAMES_NS)]
@@ -120,7 +90,7 @@ def _bag(tmp_path: Path, storage: StoragePlugin, encoding: str, frames: list[np.
                 w.write(
                     odo,
                     t + 3_000_000,
-                    TS.serialize_cdr(_odometry(*POSES[i]), "nav_msgs/msg/Odometry"),
+                    TS.serialize_cdr(odometry(*POSES[i]), "nav_msgs/msg/Odometry"),
                 )
     (tmp_path / "landmarks.json").write_text(json.dumps(LANDMARKS))
     return path

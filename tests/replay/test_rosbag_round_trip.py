@@ -25,53 +25,25 @@ from replay.drive_sim import (
 from replay.records import FrameRecord, MethodConfig, MovementRecord, RunInfo
 from replay.stages import run_log
 
-rosbags_typesys = pytest.importorskip("rosbags.typesys")
-from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
+pytest.importorskip("rosbags.typesys")
+from ros_messages import TS, T, camera_info, header, odometry
+from rosbags.rosbag2 import StoragePlugin, Writer
 
-TS = rosbags_typesys.get_typestore(rosbags_typesys.Stores.ROS2_HUMBLE)
-T = TS.types
 ARENA, DURATION_S, SEED, EPS_DEG = "square", 60.0, 5, 2.0
-
-
-def _header(t_ns: int, frame: str) -> Any:
-    stamp = T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
-    return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
 
 
 def _image(t_ns: int, bgr: np.ndarray) -> Any:
     h, w, _ = bgr.shape
     return T["sensor_msgs/msg/Image"](
-        header=_header(t_ns, "camera"), height=h, width=w, encoding="bgr8", is_bigendian=0,
+        header=header(t_ns, "camera"), height=h, width=w, encoding="bgr8", is_bigendian=0,
         step=3 * w, data=np.ascontiguousarray(bgr).ravel(),
     )  # fmt: skip
 
 
 def _camera_info(camera: DriveCamera) -> Any:
     c = camera.calibration.to_dict()
-    roi = T["sensor_msgs/msg/RegionOfInterest"](
-        x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
-    )
     k = [c["fx"], 0.0, c["cx"], 0.0, c["fy"], c["cy"], 0.0, 0.0, 1.0]
-    return T["sensor_msgs/msg/CameraInfo"](
-        header=_header(0, "camera"), height=c["height"], width=c["width"],
-        distortion_model="plumb_bob", d=np.zeros(5), k=np.array(k), r=np.eye(3).ravel(),
-        p=np.zeros(12), binning_x=0, binning_y=0, roi=roi,
-    )  # fmt: skip
-
-
-def _odometry(t_ns: int, x: float, y: float, yaw: float) -> Any:
-    point = T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0)
-    q = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
-    pose = T["geometry_msgs/msg/PoseWithCovariance"](
-        pose=T["geometry_msgs/msg/Pose"](position=point, orientation=q), covariance=np.zeros(36)
-    )
-    zero = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
-    twist = T["geometry_msgs/msg/TwistWithCovariance"](
-        twist=T["geometry_msgs/msg/Twist"](linear=zero, angular=zero), covariance=np.zeros(36)
-    )
-    return T["nav_msgs/msg/Odometry"](
-        header=_header(t_ns, "odom"), child_frame_id="base_link", pose=pose, twist=twist
-    )
+    return camera_info(0, "camera", c["width"], c["height"], k, [0.0] * 5)
 
 
 def _write_bag(path: Path, camera: DriveCamera) -> None:
@@ -92,7 +64,7 @@ def _write_bag(path: Path, camera: DriveCamera) -> None:
             if kind == "img":
                 w.write(img, t, TS.serialize_cdr(_image(t, data), "sensor_msgs/msg/Image"))
             else:
-                msg = _odometry(t, *data)
+                msg = odometry(t, *data)
                 w.write(odo, t, TS.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
 
 
