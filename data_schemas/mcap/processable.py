@@ -41,7 +41,7 @@ from data_schemas.errors import (
 )
 from data_schemas.inputs import open_input
 from data_schemas.mcap.index import CorruptChunksError, DamagedLogError, LogIndex, MessageFields
-from data_schemas.mcap.read import LogMessage, corrupt_log_line, corruption
+from data_schemas.mcap.read import LogMessage, corrupt_log_line, corruption, unfinished_line
 from data_schemas.mcap.scan import Damage, LogScan
 from data_schemas.registry import (
     CAMERA_TOPIC,
@@ -258,10 +258,7 @@ class ProcessableLog(Closing):
                 )
             )
         if not scan.finished and not corrupt:
-            raise UnfinishedLogError(
-                f"{self.name} is unfinished (the recording was interrupted): {count} "
-                f"messages are readable; {recover_hint(self.path)}"
-            )
+            raise UnfinishedLogError(unfinished_line(self.name, count, path=os.fspath(self.path)))
         self.skipped = [d for d in corrupt if d.loses_data]
         return scan.schemas, scan.channels, metadata
 

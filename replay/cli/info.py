@@ -22,7 +22,7 @@ def info(log: str, check: bool) -> None:
 
     from data_schemas.errors import CorruptLogError, UnfinishedLogError, recover_hint
     from data_schemas.mcap.info import log_summary, summary_lines
-    from data_schemas.mcap.read import corrupt_log_line, corruption
+    from data_schemas.mcap.read import corrupt_log_line, corruption, unfinished_line
     from data_schemas.outputs import being_written
 
     recording = being_written(log)  # the recorder's lock: before the scan reads the file
@@ -39,7 +39,4 @@ def info(log: str, check: bool) -> None:
     if s.state == "corrupt":
         raise CorruptLogError(corrupt_log_line(s.name, corruption(s.damage), recover_hint(s.name)))
     if s.state == "unfinished":
-        raise UnfinishedLogError(
-            f"{s.name} is unfinished: {s.message_count} messages are readable "
-            f"({s.trailing_bytes} bytes of an incomplete chunk follow); {recover_hint(s.name)}"
-        )
+        raise UnfinishedLogError(unfinished_line(s.name, s.message_count, s.trailing_bytes))

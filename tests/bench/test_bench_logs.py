@@ -37,7 +37,6 @@ from data_schemas.mcap.chunks import McapChunkWriter
 from data_schemas.mcap.index import LogIndex
 from data_schemas.mcap.layout import MESSAGE_FIELDS, MESSAGE_HEADER, STORED_CHUNK_HEADER
 from data_schemas.mcap.processable import ProcessableLog
-from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.recover import recover_log
 from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import IMAGE_SCHEMA, MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json
@@ -46,6 +45,7 @@ from recorder.clock import VirtualClock
 from recorder.frames import frame_message
 from recorder.session import build_session_doc
 from recorder.timebase import EpochClock
+from tests.mcap_reader import LogReader
 
 ROUNDS = 7
 FRAMES = 1500

@@ -13,7 +13,7 @@ from data_schemas.errors import LogError, NotMcapError
 from data_schemas.mcap.chunks import McapChunkWriter
 from data_schemas.mcap.follow import LogFollower
 from data_schemas.mcap.layout import MAGIC
-from data_schemas.mcap.read import LogReader
+from tests.mcap_reader import LogReader
 
 SOURCE = Path(__file__).parents[1] / "data" / "regress" / "occluded.mcap"
 

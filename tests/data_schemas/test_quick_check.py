@@ -18,12 +18,12 @@ from mcap.reader import make_reader
 
 from data_schemas import SchemaError
 from data_schemas.codec import validate
-from data_schemas.mcap.read import LogReader
 from data_schemas.quick_check import conforms
 from data_schemas.registry import SESSION_METADATA_NAME, schema_dict
 from recorder.sim.scenario import BUILTIN_SCENARIOS, builtin_scenario
 from replay.process import process_log
 from replay.records import MethodConfig
+from tests.mcap_reader import LogReader
 
 REGRESS = Path(__file__).parents[1] / "data" / "regress"
 

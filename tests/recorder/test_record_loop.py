@@ -17,7 +17,7 @@ import pytest
 from data_schemas.calibration import UnwrappedCalibration
 from data_schemas.codec import validate
 from data_schemas.errors import CameraError
-from data_schemas.mcap.read import LogMessage, LogReader
+from data_schemas.mcap.read import LogMessage
 from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import TOPICS
 from data_schemas.stamps import ns_from_stamp
@@ -36,6 +36,7 @@ from recorder.record import (
 from recorder.robot import KheperaRobot, RobotConfig, RobotDisconnected, RobotProtocolError
 from recorder.sim.fake_khepera import FakeKhepera
 from recorder.timebase import EpochClock
+from tests.mcap_reader import LogReader
 from tests.recorder.samples import make_session_doc
 
 CAL = UnwrappedCalibration(32, 16)

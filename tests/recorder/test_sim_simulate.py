@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from data_schemas.mcap.read import LogReader
 from recorder.record import RecordSettings
 from recorder.sim.scenario import builtin_scenario, scenario_from_dict
 from recorder.sim.simulate import SimSettings, simulate_to_file
+from tests.mcap_reader import LogReader
 
 
 def test_simulate_to_file_writes_a_complete_log(tmp_path: Path) -> None:

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from data_schemas.errors import CalibrationError
-from data_schemas.mcap.read import LogReader
 from recorder.clock import SystemClock
 from recorder.record import RecordSettings
 from recorder.sim.fake_khepera import FakeKhepera
 from recorder.start import RobotSessionSpec, record_robot_session
+from tests.mcap_reader import LogReader
 
 H, W = 24, 64
 

@@ -16,9 +16,9 @@ from mcap.reader import make_reader
 from test_rerun import _read
 
 from data_schemas.codec import validate
-from data_schemas.mcap.read import LogReader
 from recorder.sim.scenario import builtin_scenario
 from replay.cli import cli
+from tests.mcap_reader import LogReader
 
 
 def _scenario(tmp_path: Path) -> Path:

@@ -17,10 +17,10 @@ from click.testing import CliRunner
 from test_rerun import _read
 
 from data_schemas.codec import validate
-from data_schemas.mcap.read import LogReader
 from pipeline.association.final import MISSING_UNEXPLAINED
 from replay.cli import cli
 from replay.experiments.run import simulate
+from tests.mcap_reader import LogReader
 
 
 def _simulated(camera: str, seed: int, folder: Path) -> tuple[Path, Score]:

@@ -12,13 +12,13 @@ from click.testing import CliRunner
 
 from data_schemas.codec import validate
 from data_schemas.mcap.info import log_summary
-from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import TOPICS
 from recorder.clock import SystemClock, VirtualClock
 from recorder.sim.fake_khepera import FakeKhepera
 from recorder.timebase import EpochClock
 from replay.cli import cli
+from tests.mcap_reader import LogReader
 from tests.recorder.samples import make_session_doc, sample_messages
 
 
@@ -145,7 +145,10 @@ def test_info_and_recover_on_a_truncated_log(tmp_path: Path) -> None:
     assert info.exit_code == 1
     assert "UNFINISHED" in info.output
     last = info.output.strip().splitlines()[-1]
-    assert f"unfinished: {readable} messages are readable" in last and "bslam recover" in last
+    assert (
+        f"unfinished (the recording was interrupted): {readable} messages are readable" in last
+        and "bslam recover" in last
+    )
 
     fixed = tmp_path / "fixed.mcap"
     rec = CliRunner().invoke(cli, ["recover", str(broken), str(fixed)])

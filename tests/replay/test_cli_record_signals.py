@@ -20,11 +20,11 @@ import pytest
 from data_schemas.codec import validate
 from data_schemas.errors import NotMcapError
 from data_schemas.mcap.info import log_summary
-from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.recover import recover_log
 from data_schemas.registry import TOPICS
 from recorder.clock import SystemClock
 from recorder.sim.fake_khepera import FakeKhepera
+from tests.mcap_reader import LogReader
 
 ROOT = Path(__file__).resolve().parents[2]
 H, W = 48, 96

@@ -16,10 +16,10 @@ from click.testing import CliRunner
 from data_schemas.angles import wrap_rad
 from data_schemas.codec import validate
 from data_schemas.colors import NOMINAL_BGR
-from data_schemas.mcap.read import LogReader
 from data_schemas.registry import TOPICS
 from data_schemas.stamps import ns_from_stamp
 from replay.cli import cli
+from tests.mcap_reader import LogReader
 
 
 def _simulate(out: Path, *args: str) -> list[tuple[str, dict[str, Any]]]:

@@ -51,7 +51,7 @@ def _reordered(source: Path, out: Path, shift: str, rename: dict[str, str] | Non
     from mcap.records import Channel, Message, Schema
 
     from data_schemas.mcap.chunks import McapChunkWriter
-    from data_schemas.mcap.read import LogReader
+    from tests.mcap_reader import LogReader
 
     with LogReader(source) as reader:
         metadata = reader.metadata

@@ -24,9 +24,9 @@ from mcap.writer import CompressionType, IndexType, Writer
 from data_schemas.mcap.chunks import McapChunkWriter, serialise
 from data_schemas.mcap.info import log_summary
 from data_schemas.mcap.layout import MAGIC, RECORD_HEADER
-from data_schemas.mcap.read import LogReader
 from data_schemas.registry import MESSAGE_ENCODING, SCHEMA_ENCODING, schema_json
 from replay.cli import cli
+from tests.mcap_reader import LogReader
 
 Layout = Callable[[Path, Path], None]
 

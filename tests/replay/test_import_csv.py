@@ -13,8 +13,8 @@ from click.testing import CliRunner
 from importing import on, read_back
 
 from data_schemas.mcap.processable import ProcessableLog
-from data_schemas.mcap.read import LogReader
 from replay.cli import cli
+from tests.mcap_reader import LogReader
 
 
 def _files(tmp_path: Path, bearings: str, odometry: str, catalog: object) -> list[str]:

@@ -12,11 +12,11 @@ from click.testing import CliRunner, Result
 from viewer import HAS_VIEWER, needs_experiments, needs_viewer
 
 from data_schemas.errors import OutputError
-from data_schemas.mcap.read import LogReader
 from data_schemas.outputs import OutputGuard, move_aside
 from recorder.clock import SystemClock
 from recorder.sim.fake_khepera import FakeKhepera
 from replay.cli import cli
+from tests.mcap_reader import LogReader
 from tests.replay.test_cli_record_info import _inputs
 
 

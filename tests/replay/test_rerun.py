@@ -13,10 +13,10 @@ import rerun as rr
 from click.testing import CliRunner
 from logfactory import HEIGHT, MOVES, write_log
 
-from data_schemas.mcap.read import LogReader
 from replay.cli import cli
 from replay.process import process_log
 from replay.records import MethodConfig
+from tests.mcap_reader import LogReader
 
 
 def _read(rrd: Path) -> dict[str, list[dict[str, Any]]]:

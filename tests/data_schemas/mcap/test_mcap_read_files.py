@@ -18,12 +18,12 @@ from data_schemas.errors import (
     UnfinishedLogError,
 )
 from data_schemas.mcap.info import log_summary
-from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.recover import recover_log
 from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import SESSION_METADATA_NAME
 from recorder.clock import VirtualClock
 from recorder.timebase import EpochClock
+from tests.mcap_reader import LogReader
 from tests.recorder.samples import make_session_doc, sample_messages
 
 

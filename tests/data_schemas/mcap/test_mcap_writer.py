@@ -17,11 +17,11 @@ from mcap.stream_reader import StreamReader
 
 from data_schemas.codec import validate
 from data_schemas.errors import LogError, SchemaError
-from data_schemas.mcap.read import LogReader
 from data_schemas.mcap.writer import LogWriter
 from data_schemas.registry import SESSION_METADATA_NAME, TOPICS
 from recorder.clock import VirtualClock
 from recorder.timebase import EpochClock
+from tests.mcap_reader import LogReader
 from tests.recorder.samples import make_session_doc, sample_messages
 
 #: the channels a recorder writes (``/pipeline/...`` are derived logs' channels)
