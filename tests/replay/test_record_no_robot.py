@@ -187,6 +187,7 @@ def test_a_stop_signal_finishes_and_indexes_the_log(drive: dict[str, Any]) -> No
     assert counts["/camera/panorama"] == 10 < len(drive["frames"])
 
 
+@pytest.mark.slow  # three recordings/imports and three maps
 def test_the_video_the_folder_of_its_frames_and_import_images_map_alike(
     drive: dict[str, Any],
 ) -> None:
