@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.errors import EstimationError
+from data_schemas.mcap.open import MessageLog
 from data_schemas.registry import (
     BEARINGS_TOPIC,
     CAMERA_TOPIC,
@@ -48,7 +49,6 @@ from pipeline.slam import MovementStatus, Placement
 from replay.plan import MovementPlan
 from replay.records import FrameRecord, MethodConfig, MovementRecord, RunInfo, Sink
 from replay.stages import (
-    MessageLog,
     decode_image,
     estimate_records,
     no_camera,

@@ -4,21 +4,19 @@ from __future__ import annotations
 
 import contextlib
 import json
-import logging
 import os
 import re
-from pathlib import Path
 from typing import Any
 
+from data_schemas.mcap.open import LogSource, MessageLog, entered, log_path
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.window import LogWindow, WindowedLog, WindowError
 from data_schemas.outputs import OutputGuard
 from pipeline.slam import MovementStatus, Placement
 from replay.records import MethodConfig, Sink
 from replay.sinks.summary import SummarySink
-from replay.stages import MessageLog, run_log
+from replay.stages import run_log
 
-_LOG = logging.getLogger("bslam.logs")
 _FLAT_LIST = re.compile(r"\[\s+([^\[\]{}]*?)\s+\]")
 
 
@@ -36,18 +34,8 @@ def write_json(
     (guard or OutputGuard(force=True)).write_text(path, dumps(doc) + "\n")
 
 
-def open_log(log: str | os.PathLike[str], *, skip_corrupt: bool = False) -> ProcessableLog:
-    """Open a log to process; warn (``bslam`` logger) about what it ignores or skips."""
-    opened = ProcessableLog(log, skip_corrupt=skip_corrupt)
-    for note in opened.notes:
-        _LOG.warning(note)
-    for damage in opened.skipped:
-        _LOG.warning(f"{opened.name}: skipped {damage.describe(salvaged=False)}")
-    return opened
-
-
 def process_log(
-    log: str | os.PathLike[str] | MessageLog,
+    log: LogSource,
     method: MethodConfig,
     *,
     out: str | os.PathLike[str] | None = None,
@@ -86,19 +74,14 @@ def process_log(
     WindowError
         ``window`` names a movement the log does not have, or ``log`` is being followed.
     """
-    source = Path(log) if isinstance(log, str | os.PathLike) else log.path
-    guard = OutputGuard([source], force=force)
+    guard = OutputGuard([log_path(log)], force=force)
     for path, what in ((out, "derived log"), (summary, "summary")):
         if path is not None:
             guard.claim(path, what=what)
     summary_sink = SummarySink()
     sinks: list[Sink] = [summary_sink, *extra_sinks]
     with contextlib.ExitStack() as stack:
-        opened: MessageLog = (
-            stack.enter_context(open_log(log, skip_corrupt=skip_corrupt))
-            if isinstance(log, str | os.PathLike)
-            else log
-        )
+        opened = entered(log, stack, skip_corrupt=skip_corrupt)
         if window:
             opened = windowed(opened, window)
         if out is not None:

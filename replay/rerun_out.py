@@ -13,13 +13,13 @@ from urllib.parse import quote, urlsplit
 import rerun as rr
 
 from data_schemas.errors import BslamError
+from data_schemas.mcap.followed import FollowedLog
+from data_schemas.mcap.open import LogSource, MessageLog, entered, log_path
 from data_schemas.outputs import OutputGuard, create_new, pipe_into
 from replay.blueprint import method_blueprint
-from replay.follow import FollowedLog
-from replay.process import open_log, process_log
+from replay.process import process_log
 from replay.records import PRIORS, MethodConfig, Sink
 from replay.sinks.rerun_sink import RerunSink
-from replay.stages import MessageLog
 
 APPLICATION_ID = "bearing-slam"
 
@@ -163,7 +163,7 @@ def _check_reachable(url: str, timeout_s: float = 2.0) -> None:
 
 
 def replay_log(
-    log: str | os.PathLike[str] | MessageLog,
+    log: LogSource,
     method: MethodConfig,
     rec: rr.RecordingStream,
     *,
@@ -188,7 +188,7 @@ def replay_log(
 
 
 def save_rrd(
-    log: str | os.PathLike[str] | MessageLog,
+    log: LogSource,
     method: MethodConfig,
     rrd: str | os.PathLike[str],
     *,
@@ -198,25 +198,21 @@ def save_rrd(
 ) -> dict[str, Any]:
     """Replay ``log`` (a path, or a log already opened or followed) into the file ``rrd``.
 
-    A finished log is replayed into a file beside ``rrd`` that is renamed into place on return.
-    A log being followed (:class:`replay.follow.FollowedLog`) is written to ``rrd`` directly,
-    so that what was read is kept however the log ends.
+        A finished log is replayed into a file beside ``rrd`` that is renamed into place on return.
+        A log being followed (:class:`data_schemas.mcap.followed.FollowedLog`) is written to ``rrd``
+    directly,
+        so that what was read is kept however the log ends.
 
-    Raises
-    ------
-    OutputError
-        ``rrd`` is the log (or a link to it), or exists without ``force``.
+        Raises
+        ------
+        OutputError
+            ``rrd`` is the log (or a link to it), or exists without ``force``.
     """
-    source = log if isinstance(log, str | os.PathLike) else log.path
-    guard = OutputGuard([source], force=force)
+    guard = OutputGuard([log_path(log)], force=force)
     guard.claim(rrd, what="Rerun recording")
     followed = isinstance(log, FollowedLog)
     with contextlib.ExitStack() as stack:
-        opened = (
-            stack.enter_context(open_log(log, skip_corrupt=skip_corrupt))
-            if isinstance(log, str | os.PathLike)
-            else log
-        )  # a bad log fails here, before any output exists
+        opened = entered(log, stack, skip_corrupt=skip_corrupt)  # a bad log fails here, first
         # Rerun only logs a failed write: it writes into a pipe, and every write to the file
         # is ours (checked, then fsynced before the file is renamed into place)
         stream: IO[bytes]

@@ -4,7 +4,8 @@
 (:mod:`replay.records`) to sinks. It reads frames, ``/robot/movement`` and the simulator's
 truth in one pass, as they come, so a finished log
 (:class:`data_schemas.mcap.processable.ProcessableLog`) and a log still being written
-(:class:`replay.follow.FollowedLog`) go through the same code. Frames are decoded only where a
+(:class:`data_schemas.mcap.followed.FollowedLog`) go through the same code. Frames are decoded only
+where a
 sink needs them (keyframes for the estimate; every frame for Rerun).
 A movement is processed once its end keyframe and its end message have arrived; one that
 cannot be used (missing keyframe, reference landmark not visible, degenerate
@@ -19,19 +20,18 @@ record, with a warning.
 
 from __future__ import annotations
 
+import contextlib
 import logging
-import os
-from collections.abc import Collection, Iterator, Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import pybase64
 from numpy.typing import NDArray
 
 from data_schemas.errors import EstimationError, ImageError, MissingMetadataError, SchemaError
-from data_schemas.mcap.processable import ProcessableLog
+from data_schemas.mcap.open import LogSource, MessageLog, entered
 from data_schemas.mcap.read import LogMessage
 from data_schemas.registry import (
     BEARINGS_TOPIC,
@@ -173,20 +173,6 @@ class _State:
     keys_at: dict[int, list[tuple[int, str]]] = field(default_factory=dict)
     pending: LogMessage | None = None
     recent: dict[int, LogMessage] = field(default_factory=dict)
-
-
-class MessageLog(Protocol):
-    """What the runner reads: a log's name, its session, its messages in log-time order.
-
-    :class:`data_schemas.mcap.processable.ProcessableLog` (a finished log) and
-    :class:`replay.follow.FollowedLog` (a log still being written) are both one.
-    """
-
-    name: str
-    path: Path
-    session: Session
-
-    def messages(self, topics: Collection[str] | None = None) -> Iterator[LogMessage]: ...
 
 
 class Runner:
@@ -482,18 +468,13 @@ class Runner:
         )
 
 
-def run_log(
-    log: str | os.PathLike[str] | MessageLog, method: MethodConfig, sinks: Sequence[Sink]
-) -> None:
+def run_log(log: LogSource, method: MethodConfig, sinks: Sequence[Sink]) -> None:
     """Run one log (a path, or a log already opened or followed) through the stages into ``sinks``.
 
     Each sink's ``finish`` is called, also after an error. A path is opened and closed here.
     """
-    if not isinstance(log, str | os.PathLike):
-        _run_one(log, method, sinks)
-        return
-    with ProcessableLog(log) as opened:
-        _run_one(opened, method, sinks)
+    with contextlib.ExitStack() as stack:
+        _run_one(entered(log, stack), method, sinks)
 
 
 def driving_log(topics: Collection[str] | None, session: Session) -> bool:

@@ -118,7 +118,7 @@ class LogWindow:
 
 
 class WindowedLog:
-    """The messages of ``log`` in a window: a :class:`replay.stages.MessageLog`.
+    """The messages of ``log`` in a window: a :class:`data_schemas.mcap.open.MessageLog`.
 
     Attributes
     ----------

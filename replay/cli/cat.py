@@ -41,8 +41,8 @@ def cat(
     import json
 
     from data_schemas.mcap.cat import log_documents
+    from data_schemas.mcap.open import open_log
     from data_schemas.mcap.window import LogWindow
-    from replay.process import open_log
 
     with open_log(log) as opened:
         docs = log_documents(

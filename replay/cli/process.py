@@ -158,13 +158,13 @@ def _process_followed(
     force: bool,
 ) -> None:
     """One log followed while it is written, with the terminal view on stderr."""
-    from replay.follow import FollowedLog
+    from data_schemas.mcap.open import open_log
     from replay.process import dumps, process_log, result_line
     from replay.sinks.terminal import TerminalView
 
     if len(logs) != 1 or scheduler is not None:
         raise click.UsageError("--follow takes one LOG file (and no --scheduler)")
-    with FollowedLog(logs[0], idle_timeout_s=idle_timeout) as log:
+    with open_log(logs[0], follow=True, idle_timeout_s=idle_timeout) as log:
         doc = process_log(
             log, method, out=out, summary=summary, extra_sinks=(TerminalView(),), force=force
         )

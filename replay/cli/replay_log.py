@@ -91,11 +91,12 @@ def replay(
     from replay.extras import require_viewer
 
     require_viewer("bslam replay")
+    from data_schemas.mcap.followed import FollowedLog
+    from data_schemas.mcap.open import open_log
     from data_schemas.mcap.processable import ProcessableLog
     from data_schemas.mcap.window import LogWindow
     from replay.cli.recording import viewing_hints
-    from replay.follow import FollowedLog
-    from replay.process import open_log, result_line, windowed
+    from replay.process import result_line, windowed
     from replay.rerun_out import (
         DEFAULT_GRPC_PORT,
         DEFAULT_WEB_PORT,
@@ -131,7 +132,7 @@ def replay(
     with show_skips():
         # a bad log fails here, before any output exists
         opened: FollowedLog | ProcessableLog = (
-            FollowedLog(log, idle_timeout_s=idle_timeout)
+            open_log(log, follow=True, idle_timeout_s=idle_timeout)
             if follow
             else open_log(log, skip_corrupt=skip_corrupt)
         )

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from data_schemas.mcap.followed import FollowedLog
 from replay.cli import cli
-from replay.follow import FollowedLog
 from replay.process import process_log
 from replay.records import MethodConfig, MovementRecord
 from replay.sinks.summary import SummarySink
