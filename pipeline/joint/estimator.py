@@ -40,6 +40,7 @@ from pipeline.joint.geometry import (
     pose_params,
     predicted_bearings,
     resect,
+    widest_std,
 )
 from pipeline.joint.noise import NoiseEstimate, estimate_noise, robust_std
 from pipeline.joint.result import JointMovementResult
@@ -118,9 +119,15 @@ def _reach(s: Sightings, o1_fl: NDArray[np.float64]) -> float:
 _Seen = tuple[bool, int, tuple[str, ...]]
 
 
-@dataclass(frozen=True)
-class _Snapshot:
-    """The map's state before a movement (to roll back to when the movement breaks it)."""
+@dataclass
+class _MapState:
+    """What a rollback restores: the movements (placed in the graph, or waiting), the links
+    between consecutive placed movements, the landmarks in the graph and the bearings waiting
+    for theirs, the rejected bearings, the landmark estimates and the bearing noise.
+
+    The rest of :class:`JointSlam` is derived from it and rebuilt after a rollback: the iSAM2
+    graph (from the variables' values), the bearing table, the factor indices.
+    """
 
     placed: dict[int, _Movement]
     waiting: dict[int, _Movement]
@@ -131,7 +138,20 @@ class _Snapshot:
     estimates: dict[str, LandmarkEstimate]
     noise: NoiseEstimate | None
     sigma_model_rad: float
-    values: gtsam.Values  # never changed in place: held, not copied
+
+    def copy(self) -> _MapState:
+        """A copy whose containers are new (the movements themselves are shared)."""
+        return _MapState(
+            dict(self.placed),
+            dict(self.waiting),
+            set(self.links),
+            set(self.in_graph),
+            {k: list(v) for k, v in self.pending.items()},
+            set(self.rejected),
+            dict(self.estimates),
+            self.noise,
+            self.sigma_model_rad,
+        )
 
 
 class JointSlam:
@@ -191,24 +211,26 @@ class JointSlam:
         self.distance_prior_rel = distance_prior_rel
         self.divergence_rms_rad = self.eps_rad if divergence_rms_rad is None else divergence_rms_rad
         self.sigma0_rad = truncated_gaussian_std(self.eps_rad)
-        self.sigma_model_rad = self.sigma0_rad
         self._lm_index = {n: i for i, n in enumerate(self.landmarks)}
-        self._placed: dict[int, _Movement] = {}
-        self._waiting: dict[int, _Movement] = {}
-        self._links: set[tuple[int, int]] = set()
-        self._in_graph: set[str] = set(reference)
-        self._pending: dict[str, list[g.Bearing]] = {}
+        self._state = _MapState(
+            placed={},
+            waiting={},
+            links=set(),
+            in_graph=set(reference),
+            pending={},
+            rejected=set(),
+            estimates={},
+            noise=None,
+            sigma_model_rad=self.sigma0_rad,
+        )
         # iSAM2 factor index of each bearing in the graph; bearings taken out as outliers
         self._factor_of: dict[g.Bearing, int] = {}
         self._staged: list[tuple[int, g.Bearing]] = []
-        self._rejected: set[g.Bearing] = set()
         # movements the bearings did not determine: what they saw, where the fit put them
         self._undetermined: dict[int, tuple[_Seen, NDArray[np.float64], NDArray[np.bool_]]] = {}
-        self._estimates: dict[str, LandmarkEstimate] = {}
         # the map's bearings as arrays, and their residuals at the map as it is (_residuals)
         self._table = BearingTable()
         self._residual_memo: tuple[gtsam.Values, int, NDArray[np.float64]] | None = None
-        self.noise: NoiseEstimate | None = None
         self.reinitializations = 0
         self._careful = True
         self._isam = self._new_isam()
@@ -216,9 +238,19 @@ class JointSlam:
         self._estimate: gtsam.Values | None = gtsam.Values()
 
     # ------------------------------------------------------------------ state
+    @property
+    def noise(self) -> NoiseEstimate | None:
+        """The bearing noise estimated from the map's residuals (None before a map)."""
+        return self._state.noise
+
+    @property
+    def sigma_model_rad(self) -> float:
+        """The bearing std (rad) the bearing factors are weighted with now."""
+        return self._state.sigma_model_rad
+
     def _new_isam(self) -> gtsam.ISAM2:
         """A fresh iSAM2, careful while the map has fewer than :data:`CAREFUL_MOVEMENTS`."""
-        self._careful = len(self._placed) < CAREFUL_MOVEMENTS
+        self._careful = len(self._state.placed) < CAREFUL_MOVEMENTS
         params = gtsam.ISAM2Params()
         params.relinearizeSkip = 1
         params.setFactorization("QR")
@@ -247,7 +279,7 @@ class JointSlam:
         """The bearing table built anew from the placed movements (after a change of the map
         other than bearings added or rejected)."""
         self._table = BearingTable()
-        self._table.add(self._bearings(), self._lm_index, self._rejected)
+        self._table.add(self._bearings(), self._lm_index, self._state.rejected)
 
     def _key(self, name: str) -> int:
         return g.landmark_key(self._lm_index[name])
@@ -280,7 +312,7 @@ class JointSlam:
     @property
     def estimates(self) -> dict[str, LandmarkEstimate]:
         """Current estimate per non-reference landmark in the graph (FL)."""
-        return dict(self._estimates)
+        return dict(self._state.estimates)
 
     @property
     def unit_m(self) -> float | None:
@@ -298,9 +330,9 @@ class JointSlam:
         they scatter about it, as the robust scale of their residuals (1.4826 times their median
         absolute value) over the map's bearing noise (:attr:`noise`). Near 1 for a landmark whose
         rays meet at one point; well above for bearings of several landmarks given one name."""
-        if self.noise is None:
+        if self._state.noise is None:
             return {}
-        sigma = max(self.noise.sigma_rad, 1e-12)
+        sigma = max(self._state.noise.sigma_rad, 1e-12)
         skip = [self._lm_index[n] for n in self.reference]
         return {
             self.landmarks[j]: (v.size, robust_std(v) / sigma)
@@ -310,18 +342,18 @@ class JointSlam:
     @property
     def used_movements(self) -> list[int]:
         """Indices of the movements in the graph, in order."""
-        return sorted(self._placed)
+        return sorted(self._state.placed)
 
     @property
     def waiting_movements(self) -> list[int]:
         """Indices of the movements not placed (yet)."""
-        return sorted(self._waiting)
+        return sorted(self._state.waiting)
 
     @property
     def trajectory_fl(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """Per movement in the graph (index order), O1 and O2 as (1, 2) arrays in FL."""
         out = []
-        for k in sorted(self._placed):
+        for k in sorted(self._state.placed):
             mp = self._movement_pose(k)
             out.append((mp.o1_fl[None, :], mp.o2_fl[None, :]))
         return out
@@ -333,10 +365,10 @@ class JointSlam:
         covariances are. A keyframe whose marginal iSAM2 cannot give (an indeterminate
         system) is left out."""
         scale = 1.0
-        if self.noise is not None:
-            scale = self.noise.variance_rad2 / self.sigma_model_rad**2
+        if self._state.noise is not None:
+            scale = self._state.noise.variance_rad2 / self._state.sigma_model_rad**2
         out = {}
-        for k in sorted(self._placed):
+        for k in sorted(self._state.placed):
             for end in (0, 1):
                 key = g.pose_key(k, end)
                 p = self._values.atPose2(key)
@@ -351,7 +383,7 @@ class JointSlam:
 
     # ------------------------------------------------------------------ placement
     def _sightings(self, m: _Movement) -> Sightings:
-        used = [b for b in m.bearings if b.landmark in self._in_graph]
+        used = [b for b in m.bearings if b.landmark in self._state.in_graph]
         return Sightings(
             np.array([self._point(b.landmark) for b in used], np.float64).reshape(-1, 2),
             np.array([b.end for b in used], np.int64),
@@ -390,11 +422,11 @@ class JointSlam:
         it at the pose last fitted against the map as it is now. A fit that determines nothing
         at all (singular) is no such evidence: a degenerate local optimum looks the same.
         """
-        used = [b for b in m.bearings if b.landmark in self._in_graph]
+        used = [b for b in m.bearings if b.landmark in self._state.in_graph]
         s = self._sightings(m)
         n1 = int((s.end == 0).sum())
         n2 = int((s.end == 1).sum())
-        chained = m.index - 1 in self._placed
+        chained = m.index - 1 in self._state.placed
         need = 2 if chained else 4
         if n1 < 1 or n2 < 1 or n1 + n2 < need:
             return (
@@ -456,7 +488,9 @@ class JointSlam:
 
     def _links_of(self, k: int) -> list[tuple[int, int]]:
         """In-place links of movement ``k`` to its placed neighbours."""
-        return [(a, b) for a, b in ((k - 1, k), (k, k + 1)) if {a, b} - {k} <= set(self._placed)]
+        return [
+            (a, b) for a, b in ((k - 1, k), (k, k + 1)) if {a, b} - {k} <= set(self._state.placed)
+        ]
 
     def _distance_m(self, m: _Movement) -> float | None:
         """The distance the prior uses for ``m`` (None: no prior, or no usable distance)."""
@@ -476,7 +510,7 @@ class JointSlam:
 
     def _link_factor(self, link: tuple[int, int]) -> gtsam.NonlinearFactor:
         a, b = link
-        turn = self._placed[b].turn_rad if self.turn_prior_sigma_rad is not None else None
+        turn = self._state.placed[b].turn_rad if self.turn_prior_sigma_rad is not None else None
         return g.in_place_factor(
             g.pose_key(a, 1), g.pose_key(b, 0), turn, self.turn_prior_sigma_rad or 0.0
         )
@@ -492,8 +526,8 @@ class JointSlam:
         """Put a placed movement's poses, constraints and bearings into ``graph``/``values``
         (``outliers`` stay out, as rejected)."""
         links = self._links_of(m.index)
-        self._placed[m.index] = m
-        self._waiting.pop(m.index, None)
+        self._state.placed[m.index] = m
+        self._state.waiting.pop(m.index, None)
         graph.add(g.straight_factor(g.pose_key(m.index, 0), g.pose_key(m.index, 1)))
         for end, p2 in enumerate(_pose2s(pose)):
             key = g.pose_key(m.index, end)
@@ -507,34 +541,34 @@ class JointSlam:
                 graph.add(g.weak_scale_prior(log_scale))
             graph.add(self._distance_factor(m.index, distance))
         for link in links:
-            self._links.add(link)
+            self._state.links.add(link)
             graph.add(self._link_factor(link))
         noise = self._bearing_noise()
         for b in m.bearings:
             if outliers and b in outliers:
-                self._rejected.add(b)
-            elif b.landmark in self._in_graph:
+                self._state.rejected.add(b)
+            elif b.landmark in self._state.in_graph:
                 self._add_bearing(graph, b, noise)
             else:
-                self._pending.setdefault(b.landmark, []).append(b)
-        mapped = [b for b in m.bearings if b.landmark in self._in_graph]
+                self._state.pending.setdefault(b.landmark, []).append(b)
+        mapped = [b for b in m.bearings if b.landmark in self._state.in_graph]
         self._table.add(mapped, self._lm_index, outliers or ())
 
     def _enter_pending(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> list[str]:
         """Landmarks that can enter the graph now, with their waiting bearings."""
         entered = []
         noise = self._bearing_noise()
-        for name in sorted(self._pending, key=self._lm_index.__getitem__):
+        for name in sorted(self._state.pending, key=self._lm_index.__getitem__):
             point = self._initial_point(name, values)
             if point is None:
                 continue
             values.insert(self._key(name), point)
             graph.add(g.weak_point_prior(self._key(name), point))
-            waiting = self._pending.pop(name)
+            waiting = self._state.pending.pop(name)
             for bearing in waiting:
                 self._add_bearing(graph, bearing, noise)
             self._table.add(waiting, self._lm_index)
-            self._in_graph.add(name)
+            self._state.in_graph.add(name)
             entered.append(name)
         return entered
 
@@ -577,10 +611,10 @@ class JointSlam:
         graph = gtsam.NonlinearFactorGraph()
         noise = self._bearing_noise()
         for b in back:
-            self._rejected.discard(b)
+            self._state.rejected.discard(b)
             self._add_bearing(graph, b, noise)
         remove = [self._factor_of.pop(b) for b in out]
-        self._rejected.update(out)
+        self._state.rejected.update(out)
         self._table.set_rejected(back, False)
         self._table.set_rejected(out, True)
         self._update(graph, gtsam.Values(), remove)
@@ -614,7 +648,7 @@ class JointSlam:
             if values is None:
                 values = gtsam.Values(self._values)
             values.update(self._key(name), fix.point_fl)
-            self._rejected.difference_update(own)
+            self._state.rejected.difference_update(own)
             self._table.set_rejected(own, False)
             moved.append(name)
         if values is not None:
@@ -625,10 +659,10 @@ class JointSlam:
         """Place every waiting movement the map can place now (again while any is placed)."""
         placed: list[int] = []
         progress = True
-        while progress and self._waiting:
+        while progress and self._state.waiting:
             progress = False
-            for k in sorted(self._waiting):
-                m = self._waiting[k]
+            for k in sorted(self._state.waiting):
+                m = self._state.waiting[k]
                 found = self._place(m)
                 if isinstance(found, str):
                     continue
@@ -643,15 +677,15 @@ class JointSlam:
     def _bootstrap(self) -> list[int] | str:
         """Start the map: one batch solve over the waiting movements with a reference frame."""
         guesses = {}
-        for k in sorted(self._waiting):
-            guess = self._reference_guess(self._waiting[k].observation())
+        for k in sorted(self._state.waiting):
+            guess = self._reference_guess(self._state.waiting[k].observation())
             if guess is not None:
                 guesses[k] = guess
         if not guesses:
             return "no movement sees the reference pair with parallax yet (the map starts there)"
         seeds: dict[str, list[NDArray[np.float64]]] = {}
         for k, guess in guesses.items():
-            obs = self._waiting[k].observation()
+            obs = self._state.waiting[k].observation()
             for name, b1 in obs.bearings_o1_rad.items():
                 b2 = obs.bearings_o2_rad.get(name)
                 if name in self.reference or b2 is None:
@@ -666,12 +700,12 @@ class JointSlam:
         n_bearings = sum(
             1
             for k in guesses
-            for b in self._waiting[k].bearings
+            for b in self._state.waiting[k].bearings
             if b.landmark in self.reference or b.landmark in seeds
         )
         n_links = sum(1 for k in guesses if k - 1 in guesses)
         dof = n_bearings - (4 * len(guesses) - 2 * n_links + 2 * len(seeds))
-        paper_frames = all(self._paper_frame(self._waiting[k].observation()) for k in guesses)
+        paper_frames = all(self._paper_frame(self._state.waiting[k].observation()) for k in guesses)
         if dof < (0 if paper_frames else BOOTSTRAP_DOF):
             alone = (
                 "; one movement alone never has more: the map waits for another that sees "
@@ -683,6 +717,7 @@ class JointSlam:
                 f"waiting for more bearings to start the map ({dof} more bearings than unknowns, "
                 f"need {BOOTSTRAP_DOF}{alone})"
             )
+        before = self._state.copy()
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         l1, l2 = self.reference
         for f in g.gauge_factors(self._key(l1), self._key(l2)):
@@ -693,13 +728,11 @@ class JointSlam:
             point = np.median(np.array(pts), axis=0)
             values.insert(self._key(name), point)
             graph.add(g.weak_point_prior(self._key(name), point))
-            self._in_graph.add(name)
+            self._state.in_graph.add(name)
         for k, guess in guesses.items():
-            self._add(self._waiting[k], guess, graph, values)
-        params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(100)
+            self._add(self._state.waiting[k], guess, graph, values)
         try:
-            solved = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+            solved = g.solve_batch(graph, values)
         except RuntimeError as exc:
             solved = None
             why = f"bootstrap failed ({str(exc).strip().splitlines()[0]})"
@@ -713,11 +746,7 @@ class JointSlam:
                 else ""
             )
         if why or solved is None:  # undo: the movements wait again
-            for k in guesses:
-                self._waiting[k] = self._placed.pop(k)
-            self._links.clear()
-            self._in_graph = set(self.reference)
-            self._pending.clear()
+            self._state = before
             self._staged.clear()
             self._table = BearingTable()
             self._values = gtsam.Values()
@@ -730,7 +759,7 @@ class JointSlam:
     def _initial_point(self, name: str, values: gtsam.Values) -> NDArray[np.float64] | None:
         """Initial value for a landmark not in the graph, from its rays or the particles."""
         origins, dirs = [], []
-        for b in self._pending.get(name, []):
+        for b in self._state.pending.get(name, []):
             key = g.pose_key(b.movement, b.end)
             pose = values.atPose2(key) if values.exists(key) else self._pose2(key)
             origins.append((pose.x(), pose.y()))
@@ -745,15 +774,13 @@ class JointSlam:
         ):
             return fix.point_fl
         belief = self.paper.estimates.get(name)
-        if belief is not None:
-            spread = math.sqrt(max(float(np.linalg.eigvalsh(belief.cov_fl)[-1]), 0.0))
-            if spread <= TIGHT_BELIEF_FL:
-                return np.asarray(belief.mean_fl, np.float64)
+        if belief is not None and widest_std(belief.cov_fl) <= TIGHT_BELIEF_FL:
+            return np.asarray(belief.mean_fl, np.float64)
         return None
 
     # ------------------------------------------------------------------ graph
     def _bearing_noise(self) -> gtsam.noiseModel.Base:
-        return g.bearing_noise(self.sigma_model_rad, self.robust)
+        return g.bearing_noise(self._state.sigma_model_rad, self.robust)
 
     def _bearing_factor(self, b: g.Bearing, noise: gtsam.noiseModel.Base) -> gtsam.NonlinearFactor:
         return g.bearing_factor(
@@ -765,9 +792,9 @@ class JointSlam:
         without the rejected ones)."""
         return [
             b
-            for k in sorted(self._placed)
-            for b in self._placed[k].bearings
-            if b.landmark in self._in_graph and (rejected or b not in self._rejected)
+            for k in sorted(self._state.placed)
+            for b in self._state.placed[k].bearings
+            if b.landmark in self._state.in_graph and (rejected or b not in self._state.rejected)
         ]
 
     def _full_graph(self, values: gtsam.Values) -> gtsam.NonlinearFactorGraph:
@@ -776,20 +803,20 @@ class JointSlam:
         l1, l2 = self.reference
         for f in g.gauge_factors(self._key(l1), self._key(l2)):
             graph.add(f)
-        for name in self._in_graph - set(self.reference):
+        for name in self._state.in_graph - set(self.reference):
             key = self._key(name)
             graph.add(g.weak_point_prior(key, np.asarray(values.atPoint2(key), np.float64)))
         if values.exists(g.SCALE_KEY):
             graph.add(g.weak_scale_prior(float(values.atVector(g.SCALE_KEY)[0])))
-        for k in sorted(self._placed):
+        for k in sorted(self._state.placed):
             graph.add(g.straight_factor(g.pose_key(k, 0), g.pose_key(k, 1)))
             for end in (0, 1):
                 key = g.pose_key(k, end)
                 graph.add(g.weak_pose_prior(key, values.atPose2(key)))
-            distance = self._distance_m(self._placed[k])
+            distance = self._distance_m(self._state.placed[k])
             if distance is not None and values.exists(g.SCALE_KEY):
                 graph.add(self._distance_factor(k, distance))
-        for link in sorted(self._links):
+        for link in sorted(self._state.links):
             graph.add(self._link_factor(link))
         noise = self._bearing_noise()
         self._factor_of.clear()
@@ -800,26 +827,26 @@ class JointSlam:
     def _rebuild(self, values: gtsam.Values) -> None:
         """A fresh iSAM2 over every factor, from ``values`` refined by Levenberg-Marquardt."""
         graph = self._full_graph(values)
-        params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(100)
         # an indeterminate system keeps the initial values; iSAM2 below still solves from them
         with contextlib.suppress(RuntimeError):
-            values = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+            values = g.solve_batch(graph, values)
         self._isam = self._new_isam()
         self._update(graph, values)
 
     def _values_from_particles(self) -> gtsam.Values:
         """Initial values from the initializer's beliefs, keyframes re-placed against them."""
         values = gtsam.Values()
-        for name in self._in_graph:
+        for name in self._state.in_graph:
             belief = self.paper.estimates.get(name)
             point = belief.mean_fl if belief is not None else self._point(name)
             values.insert(self._key(name), np.asarray(point, np.float64))
         old, self._values = self._values, values
-        for k in sorted(self._placed):
-            m = self._placed[k]
+        for k in sorted(self._state.placed):
+            m = self._state.placed[k]
             s = self._sightings(m)
-            o1_known = self._movement_pose(k - 1, values).o2_fl if k - 1 in self._placed else None
+            o1_known = (
+                self._movement_pose(k - 1, values).o2_fl if k - 1 in self._state.placed else None
+            )
             found = (
                 resect(
                     s,
@@ -853,14 +880,18 @@ class JointSlam:
         """Free parameters of the keyframes and landmarks. The bearings still determine them
         with a distance prior, whose std is loose against the lengths the bearings give: not
         counting its share keeps the noise estimate on the safe side."""
-        return 2 * (len(self._in_graph) - 2) + 4 * len(self._placed) - 2 * len(self._links)
+        return (
+            2 * (len(self._state.in_graph) - 2)
+            + 4 * len(self._state.placed)
+            - 2 * len(self._state.links)
+        )
 
     def _jumped(self, before: dict[str, LandmarkEstimate]) -> str:
         for name, prev in before.items():
-            if name not in self._in_graph:
+            if name not in self._state.in_graph:
                 continue
             step = float(np.hypot(*(self._point(name) - prev.mean_fl)))
-            spread = math.sqrt(max(float(np.linalg.eigvalsh(prev.cov_fl)[-1]), 0.0))
+            spread = widest_std(prev.cov_fl)
             if step > JUMP_FL and step > JUMP_SIGMAS * spread:
                 return f"{name} jumped {step:.3f} FL ({step / max(spread, 1e-12):.0f} sigma)"
         return ""
@@ -884,34 +915,36 @@ class JointSlam:
 
     def _update_estimates(self) -> None:
         r = self._residuals()
-        self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad, self.eps_rad)
-        n = self.noise
-        off = abs(math.log(n.sigma_rad / self.sigma_model_rad))
+        self._state.noise = estimate_noise(r, self._n_params(), self.sigma0_rad, self.eps_rad)
+        n = self._state.noise
+        off = abs(math.log(n.sigma_rad / self._state.sigma_model_rad))
         if n.dof >= RETUNE_DOF and off > math.log(RETUNE_RATIO):
-            self.sigma_model_rad = n.sigma_rad
+            self._state.sigma_model_rad = n.sigma_rad
             self._rebuild(self._values)
             r = self._residuals()
-            self.noise = estimate_noise(r, self._n_params(), self.sigma0_rad, self.eps_rad)
-        scale = self.noise.variance_rad2 / self.sigma_model_rad**2
+            self._state.noise = estimate_noise(r, self._n_params(), self.sigma0_rad, self.eps_rad)
+        scale = self._state.noise.variance_rad2 / self._state.sigma_model_rad**2
         out = {}
-        for name in sorted(self._in_graph - set(self.reference), key=self._lm_index.__getitem__):
+        for name in sorted(
+            self._state.in_graph - set(self.reference), key=self._lm_index.__getitem__
+        ):
             cov = np.asarray(self._isam.marginalCovariance(self._key(name)), np.float64) * scale
             out[name] = LandmarkEstimate(self._point(name), 0.5 * (cov + cov.T))
-        self._estimates = out
+        self._state.estimates = out
 
     def forget(self, name: str) -> None:
         """Take landmark ``name`` out of the map with every bearing given to it so far (an
         association step found its name wrong); :meth:`add_history` may give it again."""
         if name in self.reference or name not in self._lm_index:
             return
-        for m in (*self._placed.values(), *self._waiting.values()):
+        for m in (*self._state.placed.values(), *self._state.waiting.values()):
             m.bearings[:] = [b for b in m.bearings if b.landmark != name]
-        self._pending.pop(name, None)
-        self._rejected = {b for b in self._rejected if b.landmark != name}
+        self._state.pending.pop(name, None)
+        self._state.rejected = {b for b in self._state.rejected if b.landmark != name}
         self.paper.forget(name)
-        self._estimates.pop(name, None)
-        if name in self._in_graph:
-            self._in_graph.discard(name)
+        self._state.estimates.pop(name, None)
+        if name in self._state.in_graph:
+            self._state.in_graph.discard(name)
             self._retable()
             values = gtsam.Values(self._values)
             values.erase(self._key(name))
@@ -925,21 +958,21 @@ class JointSlam:
         earlier bearings ``(movement, end, bearing_rad)`` join their movement (placed or waiting)
         and wait with the landmark's own until it enters the graph (other movements: ignored).
         """
-        if name not in self._lm_index or name in self._in_graph:
+        if name not in self._lm_index or name in self._state.in_graph:
             return
         for movement, end, b in bearings:
-            m = self._placed.get(movement) or self._waiting.get(movement)
+            m = self._state.placed.get(movement) or self._state.waiting.get(movement)
             if m is None or not math.isfinite(b):
                 continue
             bearing = g.Bearing(movement, end, name, float(b))
             m.bearings.append(bearing)
-            if movement in self._placed:  # a waiting movement brings it when placed
-                self._pending.setdefault(name, []).append(bearing)
+            if movement in self._state.placed:  # a waiting movement brings it when placed
+                self._state.pending.setdefault(name, []).append(bearing)
 
     def settle(self) -> list[str]:
         """Enter the landmarks whose bearings wait (given by :meth:`add_history` after the
         last movement) and update the map, without a movement; their names."""
-        if not self._placed or not self._pending:
+        if not self._state.placed or not self._state.pending:
             return []
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
         entered = self._enter_pending(graph, values)
@@ -971,7 +1004,7 @@ class JointSlam:
         )
 
     def _process_movement(self, obs: MovementObservation) -> JointMovementResult:
-        mapped = self._in_graph - set(self.reference)
+        mapped = self._state.in_graph - set(self.reference)
         p = self.paper.process_movement(self._initializing(obs, mapped))
         res = JointMovementResult(
             obs.index,
@@ -994,17 +1027,18 @@ class JointSlam:
             for name, b in bmap.items()
             if name in self._lm_index and math.isfinite(b)
         ]
-        if obs.index in self._placed or obs.index in self._waiting:
+        if obs.index in self._state.placed or obs.index in self._state.waiting:
             raise EstimationError(f"movement {obs.index} was already processed")
         m = _Movement(obs.index, obs.turn_rad, bearings, obs.distance_m)
-        if self._careful and len(self._placed) >= CAREFUL_MOVEMENTS:
+        if self._careful and len(self._state.placed) >= CAREFUL_MOVEMENTS:
             self._rebuild(self._values)  # the map is determined: plain steps from now on
-        snapshot = self._snapshot()
-        self._waiting[obs.index] = m
+        # the state and the values before the movement (values are never changed in place)
+        snapshot, snapshot_values = self._state.copy(), self._values
+        self._state.waiting[obs.index] = m
         before = self.estimates
         placed: list[int] = []
         why = ""
-        if not self._placed:
+        if not self._state.placed:
             boot = self._bootstrap()
             if isinstance(boot, str):
                 why = boot
@@ -1013,13 +1047,13 @@ class JointSlam:
                 graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
                 self._enter_pending(graph, values)
                 self._update(graph, values)
-        if self._placed:
+        if self._state.placed:
             placed += self._place_waiting()
-        if obs.index not in self._placed:
+        if obs.index not in self._state.placed:
             reason = why or self._place(m)
             res.status = skipped(reason if isinstance(reason, str) else "not placed")
         if not placed:
-            res.estimates, res.noise = self.estimates, self.noise
+            res.estimates, res.noise = self.estimates, self._state.noise
             return res
         res.placement = (
             Placement.REFERENCE_PAIR if p.status == MovementStatus.OK else Placement.RESECTION
@@ -1032,13 +1066,13 @@ class JointSlam:
             self._rebuild(self._values_from_particles())
             still = self._misfit(max(self.eps_rad, self.divergence_rms_rad))
             if still:
-                return self._roll_back(res, snapshot, m, divergence, still)
+                return self._roll_back(res, snapshot, snapshot_values, m, divergence, still)
         self._reject_outliers()
         if self._reseat_landmarks():
             self._reject_outliers()
         self._update_estimates()
-        res.estimates, res.noise = self.estimates, self.noise
-        if obs.index in self._placed:
+        res.estimates, res.noise = self.estimates, self._state.noise
+        if obs.index in self._state.placed:
             mp = self._movement_pose(obs.index)
             res.o1_fl, res.o2_fl = mp.o1_fl[None, :], mp.o2_fl[None, :]
             res.residuals_rad = self._movement_residuals(m)
@@ -1046,49 +1080,32 @@ class JointSlam:
             res.placement = Placement.NONE
         return res
 
-    def _snapshot(self) -> _Snapshot:
-        return _Snapshot(
-            dict(self._placed),
-            dict(self._waiting),
-            set(self._links),
-            set(self._in_graph),
-            {k: list(v) for k, v in self._pending.items()},
-            set(self._rejected),
-            dict(self._estimates),
-            self.noise,
-            self.sigma_model_rad,
-            self._values,
-        )
-
     def _roll_back(
         self,
         res: JointMovementResult,
-        snap: _Snapshot,
+        snap: _MapState,
+        snap_values: gtsam.Values,
         m: _Movement,
         divergence: str,
         still: str,
     ) -> JointMovementResult:
         """The map as it was before movement ``m``, which is refused when there was a map;
         without one, every movement waits for the bootstrap to try again with more."""
-        self._placed, self._waiting = dict(snap.placed), dict(snap.waiting)
-        self._links, self._in_graph = set(snap.links), set(snap.in_graph)
-        self._pending = {k: list(v) for k, v in snap.pending.items()}
-        self._rejected, self._estimates = set(snap.rejected), dict(snap.estimates)
-        self.noise, self.sigma_model_rad = snap.noise, snap.sigma_model_rad
+        self._state = snap
         self._staged.clear()
         self._factor_of.clear()
         self._retable()
-        if self._placed:
-            self._rebuild(snap.values)
+        if self._state.placed:
+            self._rebuild(snap_values)
         else:
-            self._waiting[m.index] = m
+            self._state.waiting[m.index] = m
             self._isam, self._values = self._new_isam(), gtsam.Values()
         res.status = skipped(
             f"the map diverged with it ({divergence}) and re-initialization from the "
             f"particles did not fit ({still}); the map is kept as before it"
         )
         res.placement, res.also_placed = Placement.NONE, []
-        res.estimates, res.noise = self.estimates, self.noise
+        res.estimates, res.noise = self.estimates, self._state.noise
         return res
 
     def _movement_residuals(self, m: _Movement) -> dict[str, tuple[float | None, float | None]]:
@@ -1096,7 +1113,7 @@ class JointSlam:
         out: dict[str, list[float | None]] = {}
         mp = self._movement_pose(m.index)
         for b in m.bearings:
-            if b.landmark not in self._in_graph:
+            if b.landmark not in self._state.in_graph:
                 continue
             o = mp.o1_fl if b.end == 0 else mp.o2_fl
             pt = self._point(b.landmark)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -310,7 +311,7 @@ def determinacy(
     info = (jac.T @ jac)[free, free]
     try:
         cov = np.linalg.inv(info)
-        pos = 0.0 if o1_known else math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+        pos = 0.0 if o1_known else widest_std(cov[:2, :2])
         logd = math.sqrt(max(float(cov[-1, -1]), 0.0))
     except np.linalg.LinAlgError:
         return math.inf, math.inf
@@ -463,3 +464,10 @@ def intersect_rays(
     ang = np.arctan2(d[:, 1], d[:, 0])
     spread = wrap_rad(ang[:, None] - ang[None, :])
     return RayFix(p, float(np.abs(spread).max()), float(np.sqrt(np.mean(err**2))))
+
+
+def widest_std(cov: NDArray[np.floating[Any]]) -> float:
+    """Standard deviation along the widest axis of a symmetric covariance (n, n): the square
+    root of its largest eigenvalue (0 when rounding makes that negative); units of the
+    covariance's square root."""
+    return math.sqrt(max(float(np.linalg.eigvalsh(cov)[-1]), 0.0))

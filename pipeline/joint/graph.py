@@ -174,3 +174,16 @@ def weak_scale_prior(log_scale: float) -> gtsam.NonlinearFactor:
     return gtsam.PriorFactorVector(
         SCALE_KEY, np.array([log_scale]), gtsam.noiseModel.Isotropic.Sigma(1, WEAK_SIGMA)
     )
+
+
+#: Iterations of a batch Levenberg-Marquardt solve (:func:`solve_batch`).
+BATCH_MAX_ITERATIONS = 100
+
+
+def solve_batch(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> gtsam.Values:
+    """``values`` refined by Levenberg-Marquardt over ``graph`` (at most
+    :data:`BATCH_MAX_ITERATIONS` iterations); raises ``RuntimeError`` when GTSAM finds the
+    system indeterminate."""
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(BATCH_MAX_ITERATIONS)
+    return gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
