@@ -250,7 +250,7 @@ def test_a_landmark_with_a_wrong_first_estimate_is_put_where_its_rays_meet(seed:
     assert np.mean(list(err_cm.values())) < 10.0
     for name in err_cm:  # no landmark keeps most of its bearings out of the map
         own = [b for b in slam._bearings() if b.landmark == name]
-        assert sum(b in slam._rejected for b in own) <= len(own) / 2
+        assert sum(b in slam._state.rejected for b in own) <= len(own) / 2
 
 
 def test_landmark_jump_is_detected() -> None:
@@ -478,7 +478,7 @@ def test_a_forgotten_landmark_leaves_no_trace_and_can_come_back() -> None:
     assert "L3" in slam.estimates
     slam.forget("L3")
     assert "L3" not in slam.estimates
-    assert not any(b.landmark == "L3" for m in slam._placed.values() for b in m.bearings)
+    assert not any(b.landmark == "L3" for m in slam._state.placed.values() for b in m.bearings)
     assert "L3" not in slam.paper.estimates  # the initializer starts it afresh
 
     def without_l3(o: MovementObservation) -> MovementObservation:
