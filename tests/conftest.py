@@ -40,7 +40,7 @@ BENCH = Path(__file__).parent / "bench"
 
 
 #: Extras' packages a test module may import. Where one is missing (the lowest-versions run,
-#: ci/lowest.txt, installs no viewer or experiments extra) such a module is skipped, not an error.
+#: .ci/lowest.txt, installs no viewer or experiments extra) such a module is skipped, not an error.
 OPTIONAL_PACKAGES = frozenset({"rerun", "pyarrow", "matplotlib", "dask", "distributed", "rosbags"})
 
 

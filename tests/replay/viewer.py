@@ -1,6 +1,6 @@
 """Marks of tests that need an extra (``viewer``: Rerun; ``experiments``: matplotlib, Dask and
 Rerun) in modules that mostly do not: they are skipped where the extra is not installed (the
-lowest-versions run, ci/lowest.txt: Rerun 0.41 needs numpy >= 2)."""
+lowest-versions run, .ci/lowest.txt: Rerun 0.41 needs numpy >= 2)."""
 
 from __future__ import annotations
 
