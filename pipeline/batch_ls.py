@@ -23,8 +23,8 @@ from numpy.typing import NDArray
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import EstimationError
 from pipeline.frame_change import to_fl
+from pipeline.geometry import triangulate_fr
 from pipeline.slam import MovementObservation
-from pipeline.triangulate import triangulate_fr
 
 
 def batch_least_squares(

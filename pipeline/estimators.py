@@ -20,7 +20,7 @@ from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
 
 if TYPE_CHECKING:
-    from pipeline.joint.geometry import KeyframePose
+    from pipeline.geometry import KeyframePose
     from pipeline.joint.noise import NoiseEstimate
 
 EstimatorName = Literal["joint", "paper"]

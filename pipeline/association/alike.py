@@ -20,7 +20,7 @@ from pipeline.association.final import FinalDetection
 from pipeline.association.tracker import Associator, MovementAssociation, pose_between
 from pipeline.bearings import Detection, camera_view_rad
 from pipeline.estimators import AssociatingEstimator, Estimator
-from pipeline.joint.geometry import KeyframePose
+from pipeline.geometry import KeyframePose
 from pipeline.slam import MovementObservation, MovementResult, MovementStatus
 
 #: Keyframe poses of the final map, (movement, end) -> pose.

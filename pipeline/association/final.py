@@ -31,7 +31,7 @@ from pipeline.association.assign import GATE_CHI2, assign
 from pipeline.association.hypotheses import FIT_TOL_EPS, MIN_PARALLAX_EPS, Ray, RaySet
 from pipeline.association.predict import MAX_PRED_STD_EPS, predict_bearings, predict_ranges
 from pipeline.estimate import LandmarkEstimate
-from pipeline.joint.geometry import KeyframePose
+from pipeline.geometry import KeyframePose
 
 #: A pairing is kept when every alternative assignment of its keyframe costs this much more
 #: (chi-square units: the best assignment at least e^1.5, about 4.5, times as likely as any

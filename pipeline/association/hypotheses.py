@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.predict import ray_point_cov
-from pipeline.joint.geometry import intersect_rays, solve_sym_2x2
+from pipeline.geometry import intersect_rays, solve_sym_2x2
 
 
 @dataclass(frozen=True)
@@ -127,7 +127,7 @@ def fit(
 
     With ``guess_fl`` (the point of the hypothesis the rays grew from) the point is the
     least-squares point of all rays, each weighted by ``1 / range^2`` from the guess (twice),
-    instead of the robust search of :func:`pipeline.joint.geometry.intersect_rays`; two rays
+    instead of the robust search of :func:`pipeline.geometry.intersect_rays`; two rays
     meet where they cross.
     """
     origins = np.array([r.origin_fl for r in rays], np.float64)

@@ -8,7 +8,7 @@ every detection: it tries the headings that turn a detection at that keyframe on
 landmark of its class (those matching the most there), and for each every length that turns a
 detection at the other keyframe onto one, counts the detections of both keyframes that fall
 within eps of a landmark of their class, refines the best poses by least squares on the
-detections they match (:func:`pipeline.joint.geometry.resect`), and keeps the best when it
+detections they match (:func:`pipeline.geometry.resect`), and keeps the best when it
 clearly beats every pose that tells another story (:data:`MATCH_LEAD`).
 :func:`place_left_out` places, once the log is processed, the movements the map left out.
 """
@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
-from pipeline.joint.geometry import (
+from pipeline.geometry import (
     KeyframePose,
     MovementPose,
     Resection,

@@ -42,7 +42,7 @@ def predict_bearings(
         Variance added to every prediction (measurement noise, heading), rad^2.
     pose_cov : (3, 3) float or None
         Covariance of the keyframe's ``(x, y, heading)`` in its own frame (FL^2, FL rad,
-        rad^2; :class:`pipeline.joint.geometry.KeyframePose`), taken as independent of the
+        rad^2; :class:`pipeline.geometry.KeyframePose`), taken as independent of the
         points'; ``heading_rad`` must then be one float.
 
     Returns

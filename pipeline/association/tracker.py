@@ -5,7 +5,7 @@ For each movement (its two keyframes, O1 and O2):
 1. Place the movement from the bearings of landmarks whose class is their own (the reference
    pair included) and their map estimates: chained on the end of the previous movement when
    that one was placed (one bearing at each keyframe suffices), else by resection
-   (:func:`pipeline.joint.geometry.resect`, four bearings at least); when these are too few
+   (:func:`pipeline.geometry.resect`, four bearings at least); when these are too few
    after a placed movement, by matching every detection with the map
    (:func:`pipeline.association.match.match_movement`).
 2. Per shared class, predict the bearing of each landmark already named (``red#1``, ...) from
@@ -88,7 +88,7 @@ from pipeline.association.predict import (
 from pipeline.association.support import Outcome, Support
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
-from pipeline.joint.geometry import KeyframePose, MovementPose, Sightings, pose_params, resect
+from pipeline.geometry import KeyframePose, MovementPose, Sightings, pose_params, resect
 from pipeline.joint.noise import robust_std
 
 #: A hypothesis missing from this many keyframes where it was predicted is dropped.

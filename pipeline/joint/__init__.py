@@ -1,10 +1,10 @@
 """The joint estimator: every bearing in one GTSAM factor graph, initialized by the paper's filter.
 
-Modules: ``geometry`` (resection, ray intersection), ``graph`` (GTSAM keys and factors),
-``noise`` (bearing noise from residuals), ``table`` (the map's bearings as arrays, for its
-residuals), ``result`` (per-movement result), ``estimator``
-(:class:`JointSlam`). ``JointSlam`` is loaded on first use: ``gtsam`` costs ~0.3 s to import,
-and reading a result needs none of it.
+Modules: ``graph`` (GTSAM keys and factors), ``noise`` (bearing noise from residuals),
+``table`` (the map's bearings as arrays, for its residuals), ``result`` (per-movement result),
+``estimator`` (:class:`JointSlam`). The gtsam-free geometry it shares with association
+(resection, ray intersection) is :mod:`pipeline.geometry`. ``JointSlam`` is loaded on first use:
+``gtsam`` costs ~0.3 s to import, and reading a result needs none of it.
 """
 
 from typing import Any

@@ -30,8 +30,7 @@ from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import to_fl
 from pipeline.fusion import PAPER_N_L, PAPER_N_R
-from pipeline.joint import graph as g
-from pipeline.joint.geometry import (
+from pipeline.geometry import (
     KeyframePose,
     MovementPose,
     Sightings,
@@ -40,14 +39,15 @@ from pipeline.joint.geometry import (
     pose_params,
     predicted_bearings,
     resect,
+    triangulate_fr,
     widest_std,
 )
+from pipeline.joint import graph as g
 from pipeline.joint.noise import NoiseEstimate, estimate_noise, robust_std
 from pipeline.joint.result import JointMovementResult
 from pipeline.joint.table import BearingTable, by_landmark
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation, MovementStatus, Placement, skipped
-from pipeline.triangulate import triangulate_fr
 
 #: Smallest angle between two rays of a landmark for it to enter the graph by intersection, in
 #: units of eps (the paper's own bound for a usable cone intersection is 2 eps).
@@ -475,7 +475,7 @@ class JointSlam:
         self, position_std: float, log_length_std: float, reach_fl: float, *, margin: float = 1.0
     ) -> str | None:
         """Why bearings do not determine a movement, from the stds of its fit for a bearing
-        noise of 1 rad (:func:`pipeline.joint.geometry.determinacy`) and the median distance
+        noise of 1 rad (:func:`pipeline.geometry.determinacy`) and the median distance
         (FL) of the landmarks from O1 (None when they do, within ``margin`` times the bounds)."""
         rel = position_std * self.sigma0_rad / max(reach_fl, 1e-9)
         logd = log_length_std * self.sigma0_rad

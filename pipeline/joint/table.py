@@ -15,8 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from pipeline.geometry import predicted_bearings
 from pipeline.joint import graph as g
-from pipeline.joint.geometry import predicted_bearings
 
 _POSE_KEY_0 = g.pose_key(0, 0)
 _LANDMARK_KEY_0 = g.landmark_key(0)

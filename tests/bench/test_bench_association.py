@@ -122,7 +122,7 @@ def _matching_case(
     """A map of ``n`` identical landmarks and the reference pair, and one movement's
     detections (3/4 of the landmarks at each keyframe, 1 degree of noise) with their true
     identities as sightings (FL)."""
-    from pipeline.joint.geometry import Sightings
+    from pipeline.geometry import Sightings
 
     pts = np.vstack(([[0.0, 0.0], [1.0, 0.0]], rng.uniform((-1, -1), (2, 1), (n, 2))))
     labels = ["L1", "L2"] + ["blue"] * n
@@ -148,10 +148,10 @@ def test_matching_cost(benchmark: Any) -> None:
     """Placing one movement by matching its detections with the map
     (:func:`pipeline.association.match.match_movement`, used only when too few are identified)
     at 4, 8, 16 and 32 identical landmarks, against the yardstick of placing it from the
-    same detections identified (:func:`pipeline.joint.geometry.resect` from the known O1),
+    same detections identified (:func:`pipeline.geometry.resect` from the known O1),
     alternated call by call; medians and their ratio per size."""
     from pipeline.association.match import match_movement
-    from pipeline.joint.geometry import resect
+    from pipeline.geometry import resect
 
     cases = {
         n: [_matching_case(n, np.random.default_rng(100 + k)) for k in range(15)] for n in SIZES

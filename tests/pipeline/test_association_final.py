@@ -20,7 +20,7 @@ from pipeline.association.hypotheses import Ray, fit
 from pipeline.association.predict import predict_bearings
 from pipeline.association.support import Support
 from pipeline.estimate import LandmarkEstimate
-from pipeline.joint.geometry import KeyframePose
+from pipeline.geometry import KeyframePose
 
 DEG = math.pi / 180.0
 

@@ -12,7 +12,7 @@ import pytest
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.match import MATCH_LEAD, MATCH_MIN, match_movement, place_left_out
-from pipeline.joint.geometry import KeyframePose, MovementPose, Sightings, keyframe_poses_of, resect
+from pipeline.geometry import KeyframePose, MovementPose, Sightings, keyframe_poses_of, resect
 
 DEG = math.pi / 180.0
 EPS = 3.0 * DEG

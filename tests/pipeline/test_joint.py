@@ -15,8 +15,8 @@ import pipeline.joint.estimator as joint_estimator
 from data_schemas.errors import EstimationError
 from pipeline.batch_ls import batch_least_squares
 from pipeline.estimators import make_estimator
+from pipeline.geometry import Sightings, intersect_rays, resect
 from pipeline.joint.estimator import JointSlam
-from pipeline.joint.geometry import Sightings, intersect_rays, resect
 from pipeline.joint.noise import FLOOR_RAD, estimate_noise, posterior_variance
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import (
@@ -535,7 +535,7 @@ def test_a_chained_movement_is_judged_on_its_heading_and_length_alone() -> None:
     """With O1 pinned by the turn in place, only heading and log length are free: their
     std comes from that 2x2 block (here weakly informed: two far landmarks), and the pin's
     scale does not count against its conditioning."""
-    from pipeline.joint.geometry import determinacy
+    from pipeline.geometry import determinacy
 
     pts = np.array([[6.0, 4.0], [7.0, -3.0]])
     o1, h, d = np.array([0.2, 0.1]), 0.3, 0.5

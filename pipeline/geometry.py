@@ -1,6 +1,9 @@
-"""Bearing geometry of the joint estimator: predicted bearings, resection, ray intersection.
+"""Bearing geometry without GTSAM: poses, predicted bearings, resection, ray intersection.
 
-Everything is in FL (unit |L1 L2|). A movement's keyframes are ``O1`` (start) and
+Placement and triangulation that the joint estimator (:mod:`pipeline.joint`), association
+(:mod:`pipeline.association`) and batch least squares (:mod:`pipeline.batch_ls`) share.
+Everything is in FL (unit |L1 L2|) except :func:`triangulate_fr` (a movement's frame FR:
+O1 = (0, 0), O2 = (1, 0)). A movement's keyframes are ``O1`` (start) and
 ``O2 = O1 + d (cos h, sin h)`` (end), both with heading ``h``; a bearing is the angle of a
 landmark seen from a keyframe, relative to ``h`` (rad, CCW).
 """
@@ -76,6 +79,22 @@ def predicted_bearings(
     """Bearings (k,) of points (k, 2) seen from origins (k, 2) with headings (k,), in [-pi, pi)."""
     d = points_fl - origins_fl
     return wrap_rad(np.arctan2(d[:, 1], d[:, 0]) - headings_rad)
+
+
+#: Minimal parallax (rad) for a two-view triangulation (:func:`triangulate_fr`) to count.
+MIN_PARALLAX_RAD = math.radians(1.0)
+
+
+def triangulate_fr(b1_rad: float, b2_rad: float) -> NDArray[np.float64] | None:
+    """Intersection (2,) FR of the rays from (0,0) and (1,0), or None if they do not meet ahead."""
+    s = math.sin(b2_rad - b1_rad)
+    if abs(s) < math.sin(MIN_PARALLAX_RAD):
+        return None
+    r1 = math.sin(b2_rad) / s
+    r2 = math.sin(b1_rad) / s
+    if r1 <= 0.0 or r2 <= 0.0:
+        return None
+    return np.array([r1 * math.cos(b1_rad), r1 * math.sin(b1_rad)])
 
 
 @dataclass(frozen=True)
