@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import rerun.blueprint as rrb
 
-from replay.sinks.rerun_sink import MOVEMENT
+from replay.sinks.rerun_columns import MOVEMENT
 
 
 def method_blueprint(*, fig1_priors: tuple[str, ...] = (), live: bool = False) -> rrb.Blueprint:

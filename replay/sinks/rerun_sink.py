@@ -28,8 +28,9 @@ Entities (the blueprint in :mod:`replay.blueprint` lays them out):
 ``fig1/...``                    the paper's Fig. 1 for this log's eps (:mod:`replay.fig1`)
 =============================== ===================================================
 
-Frame-level entities (panorama, masks, detections, bearings) are gathered and sent as columns
-every :data:`BATCH_FRAMES` frames and at the end; the rest is logged as it comes.
+Temporal entities are gathered and sent as columns (:class:`replay.sinks.rerun_columns.
+ColumnBuffer`) every :data:`BATCH_ROWS` frames and movements, at the end, and (a followed log)
+with each movement.
 
 Rerun's 2-D views draw y downwards; the ``fr`` and ``map`` roots carry a static y-flip so FR and
 FL are drawn with y up while the logged values stay in their frame.
@@ -38,8 +39,8 @@ FL are drawn with y up while the logged values stay in their frame.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -63,14 +64,13 @@ from replay.sinks.palette import (
     TRUTH_RGB,
     landmark_rgb,
 )
+from replay.sinks.rerun_columns import ColumnBuffer, Strips
 from replay.truth import errors_m
 
-LOG_TIME = "log_time"
-MOVEMENT = "movement"
 Y_UP = rr.Transform3D(mat3x3=[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
 FR_APEXES = ((0.0, 0.0), (1.0, 0.0))
-#: frames gathered before their entities are sent (as columns) to the recording
-BATCH_FRAMES = 64
+#: frames and movements gathered before their entities are sent (as columns) to the recording
+BATCH_ROWS = 64
 
 
 def shorten(
@@ -107,46 +107,6 @@ def detection_segments(
     return segments
 
 
-@dataclass
-class _FrameBatch:
-    """Frame-level values of up to :data:`BATCH_FRAMES` frames, each keyed by its row.
-
-    :meth:`RerunSink._send_frames` sends them as columns: a few ``send_columns`` calls per
-    batch instead of several ``log`` calls per frame.
-    """
-
-    log_time_ns: list[int] = field(default_factory=list)
-    movement: list[int] = field(default_factory=list)  # -1: not a keyframe
-    png: dict[int, bytes] = field(default_factory=dict)
-    labels: dict[int, NDArray[np.uint8]] = field(default_factory=dict)  # (H, W) class ids
-    detections: dict[int, dict[str, float]] = field(default_factory=dict)  # name -> bearing
-    rejected: dict[int, list[tuple[float, str]]] = field(default_factory=dict)  # bearing, why
-    bearings_deg: dict[str, dict[int, float]] = field(default_factory=dict)
-
-    def add_row(self, log_time_ns: int, movement: int | None) -> int:
-        """Start the row of one frame; return its index."""
-        self.log_time_ns.append(log_time_ns)
-        self.movement.append(-1 if movement is None else movement)
-        return len(self.log_time_ns) - 1
-
-    def timed(self, rows: Iterable[int]) -> Iterator[tuple[list[int], list[rr.TimeColumn]]]:
-        """``rows`` split into keyframes (both timelines) and the other frames (log time only)."""
-        rows = list(rows)
-        key = [r for r in rows if self.movement[r] >= 0]
-        other = [r for r in rows if self.movement[r] < 0]
-        if key:
-            yield key, [self._log_time(key), rr.TimeColumn(MOVEMENT, sequence=self._at(key))]
-        if other:
-            yield other, [self._log_time(other)]
-
-    def _at(self, rows: list[int]) -> list[int]:
-        return [self.movement[r] for r in rows]
-
-    def _log_time(self, rows: list[int]) -> rr.TimeColumn:
-        ns = np.array([self.log_time_ns[r] for r in rows], np.int64)
-        return rr.TimeColumn(LOG_TIME, timestamp=ns.astype("datetime64[ns]"))
-
-
 class RerunSink:
     """Streams one log's stage results to a :class:`rerun.RecordingStream`.
 
@@ -158,8 +118,8 @@ class RerunSink:
         Log every frame (with masks); False logs only the keyframes (panorama, masks, bearings:
         smaller, faster).
     live : bool
-        Send the gathered frames with each movement (a followed log), not only in batches of
-        ``BATCH_FRAMES``.
+        Send what is gathered with each movement (a followed log), not only in batches of
+        ``BATCH_ROWS`` frames and movements.
     """
 
     def __init__(self, rec: rr.RecordingStream, *, images: bool = True, live: bool = False) -> None:
@@ -169,12 +129,15 @@ class RerunSink:
         self.wants_all_frames = images
         self._run: RunInfo | None = None
         self._rgb: dict[str, tuple[int, int, int]] = {}
-        self._trajectory_fl: list[NDArray[np.float64]] = []
+        self._trajectory_fl = np.zeros((0, 2, 2))
+        self._trajectory_labels: list[str] = []
         self._doubtful: dict[str, str] = {}
         self._unconfirmed: dict[str, str] = {}
         self._last_movement: int | None = None
-        self._truth_trajectory_fl: list[NDArray[np.float64]] = []
-        self._batch = _FrameBatch()
+        self._truth_trajectory_fl = np.zeros((0, 2, 2))
+        self._buffer = ColumnBuffer()
+        self._gathered = 0  # frames and movements in the buffer
+        self._time: tuple[int, int | None] = (0, None)  # log time (ns), movement of the rows
 
     # ------------------------------------------------------------------ start
     def start(self, run: RunInfo) -> None:
@@ -237,245 +200,247 @@ class RerunSink:
                 static=True,
             )
 
-    def _set_time(self, log_time_ns: int, movement: int | None) -> None:
-        self.rec.set_time(LOG_TIME, timestamp=np.datetime64(log_time_ns, "ns"))
-        if movement is None:
-            self.rec.reset_time()
-            self.rec.set_time(LOG_TIME, timestamp=np.datetime64(log_time_ns, "ns"))
-        else:
-            self.rec.set_time(MOVEMENT, sequence=movement)
+    def _add(self, entity: str, archetype: type[rr.AsComponents], **fields: Any) -> None:
+        """One row of ``archetype`` on ``entity`` at the current row time, to be sent."""
+        self._buffer.add(entity, *self._time, archetype, **fields)
+
+    def _send(self) -> None:
+        """Send the gathered rows as columns."""
+        self._buffer.send(self.rec)
+        self._gathered = 0
+
+    def _gather(self) -> None:
+        """Count one frame or movement in the buffer; send it when it is full."""
+        self._gathered += 1
+        if self._gathered >= BATCH_ROWS:
+            self._send()
 
     # ------------------------------------------------------------------ frames
     def frame(self, frame: FrameRecord) -> None:
         assert self._run is not None
         movement = frame.keyframe[0] if frame.keyframe else None
-        batch = self._batch
-        row = batch.add_row(frame.log_time_ns, movement)
+        self._time = (frame.log_time_ns, movement)
+        add = self._add
         if frame.png is not None:  # the logged PNG as is: no decoding, no raw pixels to copy
-            batch.png[row] = frame.png
-        elif frame.image_bgr is not None:
-            self._set_time(frame.log_time_ns, movement)
-            self.rec.log("camera/panorama", rr.Image(frame.image_bgr, color_model="BGR"))
+            add("camera/panorama", rr.EncodedImage, blob=[frame.png], media_type=["image/png"])
+        elif frame.image_bgr is not None:  # raw pixels: sent at once, not held in a batch
+            height, width = frame.image_bgr.shape[:2]
+            pixels = rr.components.ImageFormat(
+                width=width, height=height, color_model="BGR", channel_datatype="U8"
+            )
+            raw = ColumnBuffer()
+            raw.add(
+                "camera/panorama",
+                *self._time,
+                rr.Image,
+                buffer=[np.ascontiguousarray(frame.image_bgr).ravel()],
+                format=[pixels],
+            )
+            raw.send(self.rec)
         if frame.masks is not None:
             labels = np.zeros(next(iter(frame.masks.values())).shape, np.uint8)
             for i, name in enumerate(self._run.session.landmark_names(), start=1):
                 mask = frame.masks.get(name)
                 if mask is not None:
                     labels[mask] = i
-            batch.labels[row] = labels
+            add("camera/panorama/masks", rr.SegmentationImage, buffer=[labels.ravel()])
         seen = {
             d.name: d.bearing_rad
             for d in frame.detections.values()
             if d.visible and d.bearing_rad is not None
         }
-        if frame.image_bgr is not None:
-            batch.detections[row] = seen
-            rejected = {
-                (b.bearing_rad, why) for d in frame.detections.values() for b, why in d.rejected
-            }
-            if rejected:
-                batch.rejected[row] = sorted(rejected)
-        for name, b in seen.items():
-            batch.bearings_deg.setdefault(name, {})[row] = math.degrees(b)
-        if len(batch.log_time_ns) >= BATCH_FRAMES:
-            self._send_frames()
-
-    def _send_frames(self) -> None:
-        """Send the gathered frames' entities as columns and start a new batch."""
-        assert self._run is not None
         cal = self._run.session.calibration
-        batch, send = self._batch, self.rec.send_columns
-        for rows, times in batch.timed(batch.png):
-            blobs = [batch.png[r] for r in rows]
-            columns = rr.EncodedImage.columns(blob=blobs, media_type=["image/png"] * len(rows))
-            send("camera/panorama", indexes=times, columns=columns)
-        for rows, times in batch.timed(batch.labels):
-            buffers = [batch.labels[r].ravel() for r in rows]
-            send("camera/panorama/masks", times, rr.SegmentationImage.columns(buffer=buffers))
-        for rows, times in batch.timed(batch.detections):
-            if cal is None:  # frames come with a camera only (the runner refuses others)
-                break
-            seen = [batch.detections[r] for r in rows]
-            strips = rr.LineStrips2D.columns(
-                strips=[s for d in seen for s in detection_segments(cal, d.values())],
-                colors=[self._rgb[n] for d in seen for n in d],
-                labels=[f"{n} {math.degrees(b):.1f}°" for d in seen for n, b in d.items()],
+        if frame.image_bgr is not None and cal is not None:  # frames come with a camera only
+            add(
+                "camera/panorama/detections",
+                rr.LineStrips2D,
+                strips=Strips.of(detection_segments(cal, seen.values())),
+                colors=[self._rgb[n] for n in seen],
+                labels=[f"{n} {math.degrees(b):.1f}°" for n, b in seen.items()],
             )
-            send("camera/panorama/detections", times, strips.partition([len(d) for d in seen]))
-        for rows, times in batch.timed(batch.rejected):
-            if cal is None:
-                break
-            gone = [batch.rejected[r] for r in rows]
-            strips = rr.LineStrips2D.columns(
-                strips=[s for g in gone for s in detection_segments(cal, [b for b, _ in g])],
-                labels=[f"rejected: {why}" for g in gone for _, why in g],
+            rejected = sorted(
+                {(b.bearing_rad, why) for d in frame.detections.values() for b, why in d.rejected}
             )
-            send("camera/panorama/rejected", times, strips.partition([len(g) for g in gone]))
-        for name, values in batch.bearings_deg.items():
-            for rows, times in batch.timed(values):
-                degrees = rr.Scalars.columns(scalars=[values[r] for r in rows])
-                send(f"bearings/{name}", indexes=times, columns=degrees)
-        self._batch = _FrameBatch()
+            if rejected:
+                add(
+                    "camera/panorama/rejected",
+                    rr.LineStrips2D,
+                    strips=Strips.of(detection_segments(cal, [b for b, _ in rejected])),
+                    labels=[f"rejected: {why}" for _, why in rejected],
+                )
+        for name, b in seen.items():
+            add(f"bearings/{name}", rr.Scalars, scalars=[math.degrees(b)])
+        self._gather()
 
     # ------------------------------------------------------------------ movements
     def movement(self, record: MovementRecord) -> None:
         assert self._run is not None
         run = self._run
-        if self._live and self._batch.log_time_ns:
-            self._send_frames()
-        self._set_time(record.log_time_ns, record.index)
+        self._time = (record.log_time_ns, record.index)
         self._last_movement = record.index
-        log = self.rec.log
         if not record.ok:
-            log("log", rr.TextLog(f"movement {record.index}: {record.status}", level="WARN"))
-            return
-        for name, reason in record.skipped_landmarks.items():
-            text = f"movement {record.index}: {name} skipped: {reason}"
-            log("log", rr.TextLog(text, level="INFO"))
-        self._log_joint(record)
-        self._log_fr(record, run.session)
-        self._log_fl(record, run)
+            self._text(f"movement {record.index}: {record.status}", "WARN")
+        else:
+            for name, reason in record.skipped_landmarks.items():
+                self._text(f"movement {record.index}: {name} skipped: {reason}", "INFO")
+            self._log_joint(record)
+            self._log_fr(record, run.session)
+            self._log_fl(record, run)
+        if self._live:
+            self._send()
+        else:
+            self._gather()
 
     def association(self, record: AssociationRecord) -> None:
-        if self._live and self._batch.log_time_ns:
-            self._send_frames()
-        # with the last movement on its timeline: logged after it, the final map wins there
-        self._set_time(record.log_time_ns, self._last_movement)
-        self.rec.log("log", rr.TextLog(record.text(), level="INFO"))
+        # with the last movement on its timeline: sent after it, the final map wins there
+        self._time = (record.log_time_ns, self._last_movement)
+        self._text(record.text(), "INFO")
         for name, why in record.retracted.items():
-            self.rec.log("log", rr.TextLog(f"with the final map, {name} {why}", level="WARN"))
+            self._text(f"with the final map, {name} {why}", "WARN")
             self._doubtful.pop(name, None)
             self._unconfirmed.pop(name, None)
         for name, why in record.named_at_end.items():
-            self.rec.log("log", rr.TextLog(f"with the final map, {name} {why}", level="INFO"))
+            self._text(f"with the final map, {name} {why}", "INFO")
         if record.estimates is not None and self._run is not None:
             names = [n for n in record.estimates if n not in self._run.session.reference]
             self._log_map(record.estimates, names)
             self._log_errors(record.estimates, names, self._run)
         for label, text in record.reports.items():
-            self.rec.log("log", rr.TextLog(f"{label} with the final map: {text}", level="WARN"))
+            self._text(f"{label} with the final map: {text}", "WARN")
+        self._send()
+
+    def _text(self, text: str, level: str) -> None:
+        self._add("log", rr.TextLog, text=[text], level=[level])
 
     def _log_joint(self, record: MovementRecord) -> None:
         """Placement, residuals, noise estimate and re-initialization (joint estimator only)."""
-        log = self.rec.log
         if record.placement:
-            text = f"movement {record.index}: placed by {record.placement}"
-            log("log", rr.TextLog(text, level="INFO"))
+            self._text(f"movement {record.index}: placed by {record.placement}", "INFO")
         if record.divergence:
-            text = f"movement {record.index}: map re-initialized: {record.divergence}"
-            log("log", rr.TextLog(text, level="WARN"))
+            self._text(f"movement {record.index}: map re-initialized: {record.divergence}", "WARN")
         res = [r for pair in record.residuals_rad.values() for r in pair if r is not None]
         if res:
-            log("residuals/rms_deg", rr.Scalars(math.degrees(math.sqrt(np.mean(np.square(res))))))
+            rms_deg = math.degrees(math.sqrt(np.mean(np.square(res))))
+            self._add("residuals/rms_deg", rr.Scalars, scalars=[rms_deg])
         if record.bearing_noise_rad is not None:
-            log("residuals/noise_deg", rr.Scalars(math.degrees(record.bearing_noise_rad)))
+            noise_deg = math.degrees(record.bearing_noise_rad)
+            self._add("residuals/noise_deg", rr.Scalars, scalars=[noise_deg])
 
     def _log_fr(self, record: MovementRecord, session: Session) -> None:
-        log = self.rec.log
+        add = self._add
         for name in session.landmark_names():
             particles = record.particles_fr.get(name)
             cones = record.cones_fr.get(name)
             if cones is None:
-                log(f"fr/cones/{name}", rr.Clear(recursive=False))
+                add(f"fr/cones/{name}", rr.Clear, is_recursive=[False])
             else:
                 reach = 1.5 if particles is None else 1.5 * float(np.abs(particles).max()) + 0.5
                 outlines = [
                     shorten(c, apex, reach) for c, apex in zip(cones, FR_APEXES, strict=True)
                 ]
-                log(f"fr/cones/{name}", rr.LineStrips2D(outlines, colors=[self._rgb[name]]))
+                add(
+                    f"fr/cones/{name}",
+                    rr.LineStrips2D,
+                    strips=Strips.of(outlines),
+                    colors=[self._rgb[name]],
+                )
             if particles is None:
-                log(f"fr/particles/{name}", rr.Clear(recursive=False))
+                add(f"fr/particles/{name}", rr.Clear, is_recursive=[False])
             else:
-                log(
+                add(
                     f"fr/particles/{name}",
-                    rr.Points2D(
-                        particles, colors=[self._rgb[name]], radii=rr.Radius.ui_points(2.0)
-                    ),
+                    rr.Points2D,
+                    positions=particles,
+                    colors=[self._rgb[name]],
+                    radii=[rr.Radius.ui_points(2.0)],
                 )
 
     def _log_fl(self, record: MovementRecord, run: RunInfo) -> None:
-        log = self.rec.log
+        add = self._add
         for name, particles in record.particles_fl.items():
-            log(
+            add(
                 f"map/particles/{name}",
-                rr.Points2D(particles, colors=[self._rgb[name]], radii=rr.Radius.ui_points(1.5)),
+                rr.Points2D,
+                positions=particles,
+                colors=[self._rgb[name]],
+                radii=[rr.Radius.ui_points(1.5)],
             )
         if run.estimator == "joint":
             # its initializer's belief stops with the landmark's entry in the map
             for name in record.estimates.keys() - record.particles_fl.keys():
-                log(f"map/particles/{name}", rr.Clear(recursive=False))
+                add(f"map/particles/{name}", rr.Clear, is_recursive=[False])
         names = [n for n in record.estimates if n not in run.session.reference]
         doubtful = record.doubtful_landmarks or {}
         self._doubtful = dict(doubtful)
         self._unconfirmed = dict(record.unconfirmed_landmarks or {})
         self._log_map(record.estimates, names)
         for name, why in doubtful.items():
-            log("log", rr.TextLog(f"movement {record.index}: {name} doubtful: {why}", level="WARN"))
+            self._text(f"movement {record.index}: {name} doubtful: {why}", "WARN")
         for name, rays in record.named_from.items():
             moves = sorted({m for m, _, _ in rays})
             text = (
                 f"movement {record.index}: {name} named from {len(rays)} detections "
                 f"(movements {moves[0]}-{moves[-1]})"
             )
-            log("log", rr.TextLog(text, level="INFO"))
+            self._text(text, "INFO")
         if record.rays_fl:
             measured = list(record.rays_fl)
-            log(
+            add(
                 "map/rays",
-                rr.LineStrips2D(
-                    [record.rays_fl[n] for n in measured],
-                    colors=[self._rgb[n] for n in measured],
-                    radii=rr.Radius.ui_points(0.75),
-                    labels=measured,
-                ),
+                rr.LineStrips2D,
+                strips=Strips.of([record.rays_fl[n] for n in measured]),
+                colors=[self._rgb[n] for n in measured],
+                radii=[rr.Radius.ui_points(0.75)],
+                labels=measured,
             )
         if record.o1_fl is not None and record.o2_fl is not None:
-            log(
+            add(
                 "map/observation_particles",
-                rr.Points2D(
-                    np.vstack([record.o1_fl, record.o2_fl]),
-                    colors=[TRAJECTORY_RGB],
-                    radii=rr.Radius.ui_points(1.0),
-                ),
+                rr.Points2D,
+                positions=np.vstack([record.o1_fl, record.o2_fl]),
+                colors=[TRAJECTORY_RGB],
+                radii=[rr.Radius.ui_points(1.0)],
             )
-            self._trajectory_fl.append(np.array([record.o1_fl.mean(0), record.o2_fl.mean(0)]))
-            self._log_path("map/trajectory", self._trajectory_fl, TRAJECTORY_RGB, "O")
+            ends = np.array([[record.o1_fl.mean(0), record.o2_fl.mean(0)]])
+            self._trajectory_fl = np.concatenate([self._trajectory_fl, ends])
+            k = len(self._trajectory_fl) - 1
+            self._trajectory_labels += [f"O{k}.1", f"O{k}.2"]
+            self._log_path(
+                "map/trajectory", self._trajectory_fl, TRAJECTORY_RGB, self._trajectory_labels
+            )
         truth = run.truth
         if truth is None:
             return
         if record.truth_o1_world is not None and record.truth_o2_world is not None:
-            ends = np.array([record.truth_o1_world, record.truth_o2_world])
-            self._truth_trajectory_fl.append(truth.to_fl.apply(ends))
+            ends = truth.to_fl.apply(np.array([record.truth_o1_world, record.truth_o2_world]))
+            self._truth_trajectory_fl = np.concatenate([self._truth_trajectory_fl, ends[None]])
             self._log_path("map/truth/trajectory", self._truth_trajectory_fl, TRUTH_RGB, None)
         self._log_errors(record.estimates, names, run)
 
     def _log_map(self, estimates: Mapping[str, EstimateRecord], names: Sequence[str]) -> None:
         """The map's points (labelled, doubtful and unconfirmed names marked) and 80% ellipses."""
-        log = self.rec.log
         status = {
             **{n: " (unconfirmed)" for n in self._unconfirmed},
             **{n: " (doubtful)" for n in self._doubtful},
         }
         if names:
-            log(
+            self._add(
                 "map/estimates",
-                rr.Points2D(
-                    np.array([estimates[n].mean_fl for n in names]),
-                    colors=[self._rgb[n] for n in names],
-                    radii=rr.Radius.ui_points(5.0),
-                    labels=[n + status.get(n, "") for n in names],
-                ),
+                rr.Points2D,
+                positions=np.array([estimates[n].mean_fl for n in names]),
+                colors=[self._rgb[n] for n in names],
+                radii=[rr.Radius.ui_points(5.0)],
+                labels=[n + status.get(n, "") for n in names],
             )
         for n in names:
-            log(
+            self._add(
                 f"map/ellipses/{n}",
                 # its own hue and thicker than the particles, so the region shows over its own cloud
-                rr.LineStrips2D(
-                    [estimates[n].ellipse80_fl],
-                    colors=[ELLIPSE_RGB],
-                    radii=rr.Radius.ui_points(1.5),
-                    labels=[f"{n} 80%"],
-                ),
+                rr.LineStrips2D,
+                strips=Strips.of([estimates[n].ellipse80_fl]),
+                colors=[ELLIPSE_RGB],
+                radii=[rr.Radius.ui_points(1.5)],
+                labels=[f"{n} 80%"],
             )
 
     def _log_errors(
@@ -487,28 +452,36 @@ class RerunSink:
         means = {n: estimates[n].mean_fl for n in names}
         errors = errors_m(run.truth, means, shared_classes(run.session.landmarks))
         for n, e in errors.items():
-            self.rec.log(f"error/{n}", rr.Scalars(e))
+            self._add(f"error/{n}", rr.Scalars, scalars=[e])
         if errors:
-            self.rec.log("error/mean", rr.Scalars(float(np.mean(list(errors.values())))))
+            self._add("error/mean", rr.Scalars, scalars=[float(np.mean(list(errors.values())))])
 
     def _log_path(
         self,
         entity: str,
-        segments: list[NDArray[np.float64]],
+        segments: NDArray[np.float64],
         rgb: tuple[int, int, int],
-        label: str | None,
+        labels: list[str] | None,
     ) -> None:
-        points = np.vstack(segments)
-        labels = None
-        if label is not None:
-            labels = [f"{label}{k}.{j + 1}" for k in range(len(segments)) for j in range(2)]
-        self.rec.log(
+        """A path so far: its segments (k, 2, 2) as strips, their ends as points (labelled)."""
+        self._add(
             entity,
-            rr.LineStrips2D(segments, colors=[rgb], radii=rr.Radius.ui_points(1.0)),
-            rr.Points2D(points, colors=[rgb], radii=rr.Radius.ui_points(3.0), labels=labels),
+            rr.LineStrips2D,
+            strips=Strips.of(segments),
+            colors=[rgb],
+            radii=[rr.Radius.ui_points(1.0)],
+        )
+        named = {} if labels is None else {"labels": list(labels)}
+        self._add(
+            entity,
+            rr.Points2D,
+            positions=segments.reshape(-1, 2),
+            colors=[rgb],
+            radii=[rr.Radius.ui_points(3.0)],
+            **named,
         )
 
     def finish(self) -> None:
-        """Send the frames still gathered; the caller flushes or disconnects the stream."""
-        if self._run is not None and self._batch.log_time_ns:
-            self._send_frames()
+        """Send the rows still gathered; the caller flushes or disconnects the stream."""
+        if self._run is not None and len(self._buffer):
+            self._send()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import base64
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -17,6 +19,8 @@ from replay.cli import cli
 from replay.process import process_log
 from replay.records import MethodConfig
 from tests.mcap_reader import LogReader
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _read(rrd: Path) -> dict[str, list[dict[str, Any]]]:
@@ -261,3 +265,86 @@ def test_rejected_blobs_are_shown_with_the_reason(tmp_path: Path) -> None:
     assert detected and not any(
         label.startswith("L4 ") for r in detected for label in r["LineStrips2D:labels"]
     )
+
+
+def _log_times(log: Path, topic: str) -> list[int]:
+    with LogReader(log) as reader:
+        return [m.log_time_ns for m in reader.messages([topic])]
+
+
+def test_every_row_is_at_its_log_time(
+    small_log: Path, replayed: tuple[Path, dict[str, Any]]
+) -> None:
+    """Frames at their message's log time; a movement's rows at its end keyframe's."""
+    rows = _read(replayed[0])
+    frames = [r for r in rows["/camera/panorama"] if r.get("EncodedImage:blob")]
+    assert sorted(r["log_time"] for r in frames) == _log_times(small_log, "/camera/panorama")
+    keyframes: dict[int, list[int]] = {}
+    for r in frames:
+        if r.get("movement") is not None:
+            keyframes.setdefault(r["movement"], []).append(r["log_time"])
+    assert sorted(keyframes) == list(range(len(MOVES)))
+    for entity in ("/map/estimates", "/map/trajectory", "/error/mean", "/residuals/rms_deg"):
+        timed = [r for r in rows[entity] if r.get("movement") is not None]
+        assert timed, entity
+        for r in timed:
+            assert r["log_time"] == max(keyframes[r["movement"]]), entity
+
+
+def test_map_trajectory_and_errors_at_every_movement(
+    replayed: tuple[Path, dict[str, Any]],
+) -> None:
+    """Each movement's map, path so far and errors are the summary's for that movement."""
+    rrd, doc = replayed
+    rows = _read(rrd)
+
+    def at(entity: str, column: str) -> dict[int, Any]:
+        return {r["movement"]: r[column] for r in rows[entity] if r.get(column) is not None}
+
+    strips = at("/map/trajectory", "LineStrips2D:strips")
+    ends = at("/map/trajectory", "Points2D:positions")
+    labels = at("/map/trajectory", "Points2D:labels")
+    estimates = at("/map/estimates", "Points2D:positions")
+    names = at("/map/estimates", "Points2D:labels")
+    errors = {n: at(f"/error/{n}", "Scalars:scalars") for n in doc["landmarks"]}
+    path: list[list[float]] = []
+    for entry in doc["movements"]:
+        m = entry["index"]
+        o = entry["observation_points"]
+        path.append([*o["o1"], *o["o2"]])
+        got = np.asarray(strips[m], np.float64).reshape(-1, 4)
+        np.testing.assert_allclose(got, path, atol=1e-5)  # float32 in Rerun
+        np.testing.assert_allclose(np.asarray(ends[m]).reshape(-1, 4), path, atol=1e-5)
+        assert labels[m] == [f"O{k}.{j}" for k in range(len(path)) for j in (1, 2)]
+        means = dict(zip(names[m], estimates[m], strict=True))
+        assert set(means) == set(entry["landmarks"])
+        for name, e in entry["landmarks"].items():
+            assert means[name] == pytest.approx(e["mean"], abs=1e-5)
+            assert errors[name][m][0] == pytest.approx(entry["error_m"][name], abs=1e-6)
+
+
+def test_raw_frames_are_the_logged_pixels_at_their_log_times(tmp_path: Path) -> None:
+    """A bgr8 log: every frame's pixels and format, at its message's log time."""
+    scenario = json.loads((ROOT / "recorder/sim/scenarios/paper.json").read_text())
+    scenario["trajectory"]["moves"] = 2
+    spec = tmp_path / "two.json"
+    spec.write_text(json.dumps(scenario))
+    log, rrd = tmp_path / "raw.mcap", tmp_path / "raw.rrd"
+    args = ["simulate", "--scenario", str(spec), "--out", str(log), "--encoding", "bgr8"]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    result = CliRunner().invoke(cli, ["replay", str(log), "--save", str(rrd), "--n-l", "50"])
+    assert result.exit_code == 0, result.output
+    with LogReader(log) as reader:
+        logged = {m.log_time_ns: json.loads(m.data) for m in reader.messages(["/camera/panorama"])}
+    frames = [r for r in _read(rrd)["/camera/panorama"] if r.get("Image:buffer")]
+    assert sorted(r["log_time"] for r in frames) == sorted(logged)
+    for r in frames:
+        msg = logged[r["log_time"]]
+        width, height = msg["width"], msg["height"]
+        step = msg.get("step", 3 * width)
+        rows = np.frombuffer(base64.b64decode(msg["data"]), np.uint8).reshape(height, step)
+        pixels = rows[:, : 3 * width].ravel()
+        np.testing.assert_array_equal(np.asarray(r["Image:buffer"][0], np.uint8), pixels)
+        [fmt] = r["Image:format"]
+        assert (fmt["width"], fmt["height"]) == (width, height)
