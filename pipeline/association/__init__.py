@@ -13,7 +13,8 @@ docs/method.md (association).
 
 from pipeline.association.assign import Assignment, assign
 from pipeline.association.predict import predict_bearings, ray_point_cov
-from pipeline.association.tracker import Associator, MovementAssociation, pose_between
+from pipeline.association.result import MovementAssociation
+from pipeline.association.tracker import Associator, pose_between
 
 __all__ = [
     "Assignment",

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 
 from data_schemas.session import Session, shared_classes
 from pipeline.association.final import FinalDetection
-from pipeline.association.tracker import Associator, MovementAssociation, pose_between
+from pipeline.association.result import MovementAssociation
+from pipeline.association.tracker import Associator, pose_between
 from pipeline.bearings import Detection, camera_view_rad
 from pipeline.estimators import AssociatingEstimator, Estimator
 from pipeline.geometry import KeyframePose

@@ -13,20 +13,25 @@ detection, none of them sure, and are predicted in line (within ``in_line_rad`` 
 is seen along that bearing. Only the nearest can show there, so when one is clearly the
 nearest (:data:`NEAR_RATIO`, :data:`NEAR_SIGMAS`) it takes the detection and the others are
 hidden behind it.
+
+Per movement, :func:`assign_movement` assigns each shared class's detections at O1 and at O2 to
+its named landmarks' predictions (:func:`pipeline.association.predict.predict_named`) and
+returns the :class:`MovementAssignment` the hypotheses take next: the detections, and which
+of them no name took.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from pipeline.association.predict import GATE_CHI2, Predicted
 
-#: Chi-square gate, one degree of freedom, 99.9 %.
-GATE_CHI2 = 10.83
 #: A pairing is unique when every alternative assignment costs this much more (chi-square units).
 MARGIN_CHI2 = 9.0
 #: Occlusion: the nearest landmark of a group takes its one detection when it is at most this
@@ -187,3 +192,90 @@ def assign(
     out.pairs.sort()
     out.hidden.sort()
     return out
+
+
+#: One class's detections at O1 and at O2: bearings (m1,) and (m2,), rad.
+Detections = tuple[NDArray[np.float64], NDArray[np.float64]]
+
+
+@dataclass(frozen=True)
+class MovementAssignment:
+    """One movement's detections of shared classes and what the assignment decided: the
+    record the hypothesis step takes after the assignment.
+
+    Attributes
+    ----------
+    index : int
+        The movement.
+    detections_rad : dict label -> (array (m1,), array (m2,))
+        Each shared class's detections at O1 and at O2 (rad), in the order given.
+    predicted : dict label -> (Predicted, Predicted)
+        The class's named landmarks as predicted at O1 and at O2 (only classes detected in a
+        placed movement).
+    decided : dict label -> (Assignment, Assignment)
+        Their assignment at O1 and at O2 (indices into ``predicted`` names and detections).
+    """
+
+    index: int
+    detections_rad: dict[str, Detections]
+    predicted: dict[str, tuple[Predicted, Predicted]] = field(default_factory=dict)
+    decided: dict[str, tuple[Assignment, Assignment]] = field(default_factory=dict)
+
+    def free(self, label: str) -> tuple[list[int], list[int]]:
+        """The detections of ``label`` at O1 and at O2 that no name took: unexplained, or
+        contested (they may still be a landmark not named yet); none when the movement was
+        not placed or the class was not detected."""
+        decided = self.decided.get(label)
+        if decided is None:
+            return [], []
+        a1, a2 = decided
+        return sorted(a1.unexplained + a1.contested_detections), sorted(
+            a2.unexplained + a2.contested_detections
+        )
+
+
+def assign_movement(
+    index: int,
+    detections_rad: Mapping[str, Detections],
+    predicted: Mapping[str, tuple[Predicted, Predicted]],
+    *,
+    in_line_rad: float,
+) -> MovementAssignment:
+    """Assign one movement's detections of each predicted class to its named landmarks, at O1
+    and at O2 (:func:`assign`; landmarks predicted within ``in_line_rad`` of each other are in
+    line).
+
+    Parameters
+    ----------
+    index : int
+        The movement.
+    detections_rad : dict label -> (array (m1,), array (m2,))
+        Each shared class's detections at O1 and at O2 (rad).
+    predicted : dict label -> (Predicted, Predicted)
+        The named landmarks of each class detected, predicted at O1 and at O2.
+
+    Returns
+    -------
+    MovementAssignment
+        The detections and, per class of ``predicted``, the assignment at each keyframe.
+    """
+    decided = {
+        label: (
+            _assign_at(ends[0], detections_rad[label][0], in_line_rad),
+            _assign_at(ends[1], detections_rad[label][1], in_line_rad),
+        )
+        for label, ends in predicted.items()
+    }
+    return MovementAssignment(index, dict(detections_rad), dict(predicted), decided)
+
+
+def _assign_at(p: Predicted, det_rad: NDArray[np.float64], in_line_rad: float) -> Assignment:
+    """:func:`assign` at one keyframe."""
+    return assign(
+        p.bearing_rad,
+        p.std_rad,
+        det_rad,
+        range_fl=p.range_fl,
+        range_std_fl=p.range_std_fl,
+        in_line_rad=in_line_rad,
+    )

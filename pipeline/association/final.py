@@ -1,20 +1,24 @@
-"""Every keyframe's detections associated again with the final map, once the log is processed.
+"""Once the log is processed: every keyframe's detections associated again with the final map,
+and the names repaired where the detections it leaves unexplained meet.
 
-Association movement by movement (:mod:`pipeline.association.tracker`) names a detection with
-the map as it was then: detections of a landmark from before its naming stay unnamed (unless it
-was named from them), and a young map predicts bearings too loosely to split landmarks a few
-degrees apart. After the last movement, the final map (each named landmark's point and
-covariance) and the final placement of every keyframe (its pose and the pose's covariance)
-predict each bearing far more sharply, and :func:`associate_final` assigns every keyframe's
-detections again by the rules of :func:`pipeline.association.assign.assign` (gate, one-to-one
-pairs unique by a margin, :data:`FINAL_MARGIN_CHI2`, the nearest of landmarks in line takes
-their blob). Prediction variance: the point's covariance, the keyframe pose's, and the map's
-estimated bearing noise; the bearings it names are not given to the estimator.
-A lone blob where named landmarks line up (none clearly in front) is said to be theirs
-("in line"). :func:`missing_reports` says when a class still has detections no name explains
-(every name of it given or not), and where their rays meet (:func:`meeting_point`;
-:meth:`pipeline.association.Associator.repair_final` may then give a free name, or a doubtful
-one, there).
+Association movement by movement (:mod:`pipeline.association.assign`,
+:mod:`pipeline.association.lifecycle`) names a detection with the map as it was then:
+detections of a landmark from before its naming stay unnamed (unless it was named from them),
+and a young map predicts bearings too loosely to split landmarks a few degrees apart. After the
+last movement, the final map (each named landmark's point and covariance) and the final
+placement of every keyframe (its pose and the pose's covariance) predict each bearing far more
+sharply, and :func:`associate_final` assigns every keyframe's detections again by the rules of
+:func:`pipeline.association.assign.assign` (gate, one-to-one pairs unique by a margin,
+:data:`FINAL_MARGIN_CHI2`, the nearest of landmarks in line takes their blob). Prediction
+variance: the point's covariance, the keyframe pose's, and the map's estimated bearing noise;
+the bearings it names are not given to the estimator. A lone blob where named landmarks line up
+(none clearly in front) is said to be theirs ("in line"). :func:`missing_reports` says when a
+class still has detections no name explains (every name of it given or not), and where their
+rays meet (:func:`meeting_point`).
+
+:func:`repair_final` then gives a free name, or a doubtful one, to the point where those
+detections meet as the search names a landmark, or gives names under suspicion anew where
+their detections and the unexplained ones meet (:func:`_rebuild`).
 """
 
 from __future__ import annotations
@@ -27,9 +31,30 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
-from pipeline.association.assign import GATE_CHI2, assign
-from pipeline.association.hypotheses import FIT_TOL_EPS, MIN_PARALLAX_EPS, Ray, RaySet
-from pipeline.association.predict import MAX_PRED_STD_EPS, predict_bearings, predict_ranges
+from pipeline.association.assign import MovementAssignment, assign
+from pipeline.association.hypotheses import (
+    FIT_TOL_EPS,
+    MIN_PARALLAX_EPS,
+    Hypothesis,
+    Ray,
+    RaySet,
+    fit,
+    ray_fits,
+)
+from pipeline.association.lifecycle import (
+    DISCOVER_KEYFRAMES,
+    DISCOVER_LINES,
+    DISCOVER_MOVEMENTS,
+    Lifecycle,
+)
+from pipeline.association.predict import (
+    GATE_CHI2,
+    MAX_PRED_STD_EPS,
+    BearingModel,
+    predict_bearings,
+    predict_ranges,
+)
+from pipeline.association.result import MovementAssociation
 from pipeline.estimate import LandmarkEstimate
 from pipeline.geometry import KeyframePose
 
@@ -51,6 +76,19 @@ MISSING_KEYFRAMES = 4
 #: crossing against every ray grows as the cube of the rays (800 ms per run with 330 rays
 #: unexplained, 32 landmarks of which 17-19 named).
 MEETING_CROSSINGS = 5000
+#: Once the log is processed, the names of a class under suspicion (its doubtful ones; then the
+#: one, then the REBUILD_SUSPECTS, the final map does not hold or, after those, gives a
+#: detection at the smallest share of their predictions) are given anew where their detections
+#: and those the final map left unexplained meet, when those points explain REBUILD_GAIN
+#: detections more than the names do.
+REBUILD_SUSPECTS = 2
+REBUILD_GAIN = 8
+#: Once the log is processed, a point the unexplained detections meet at is a named landmark
+#: seen again only when also this close to it (squared Mahalanobis distance with both
+#: covariances; chi-square, 2 dof, 99.9 %): from many keyframes a landmark lines up with a named
+#: one a few degrees away, whose gate then holds most of its rays, though the final map told them
+#: apart.
+FINAL_APART_CHI2 = 13.82
 
 
 @unique
@@ -326,3 +364,185 @@ def meeting_point(
         origin = np.array([r.origin_fl for r in near], np.float64).reshape(-1, 2)
         point = np.linalg.solve(lhs, normal.T @ (normal * origin).sum(axis=1))
     return point, rs.nearest_per_keyframe(rs.errors(point[None, :])[0], tol)
+
+
+def repair_final(
+    names: Lifecycle,
+    final: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    mapped: Mapping[str, LandmarkEstimate],
+    index: int,
+) -> MovementAssociation | None:
+    """Once the log is processed, per class, where the detections the final map leaves
+    unexplained meet at one point as a search names a landmark (:func:`_final_point`): with
+    names of the class still free, the point gets the next one (and the rest of the rays are
+    searched again while names are free: ``named_at_end``); with every name given and one
+    doubtful, a doubtful name is retracted and given to the point (as a full catalog does
+    during the run): the one the final association gave a detection at the smallest share of
+    the keyframes where the final map predicts it (:func:`_final_share`). When neither gives a
+    name, names under suspicion may be given anew (:func:`_rebuild`).
+
+    ``names`` holds the names given and gives the new ones, ``final`` is
+    :func:`associate_final`'s association, ``poses`` and ``mapped`` the final map, ``index``
+    the last movement. Returns what changed (``retracted``, ``named_at_end``, ``confirmed``,
+    ``history``: the estimator forgets the retracted landmarks, takes the history and
+    settles), or None when nothing did."""
+    # after the last movement: no ray is its own
+    out = MovementAssociation(index + 1, assignment=MovementAssignment(index + 1, {}))
+    for label, count in names.capacity.items():
+        full = len(names.named[label]) >= count
+        given = len(out.confirmed)
+        rays = unexplained_rays(final, label, poses)
+        while (not full or names.most_doubtful(label) is not None) and (
+            found := _final_point(names, label, rays, mapped)
+        ) is not None:
+            h, lines = found
+            out.names.setdefault(label, ([], []))
+            if full:
+                weakest = min(
+                    (n for n in names.named[label] if names.support[n].doubt() is not None),
+                    key=lambda n: _final_share(n, final, poses, mapped, names.model),
+                )
+                names.give_name(label, h, lines, out, searched=True, retract=weakest)
+                break
+            names.give_name(label, h, lines, out, searched=True)
+            x, y = h.point_fl
+            out.named_at_end[out.confirmed[-1]] = (
+                f"named once the log was processed: {len(h.rays)} detections the final map "
+                f"left unexplained, from {len({(r.movement, r.end) for r in h.rays})} "
+                f"keyframes along {lines} lines of sight, meet at ({x:.2f}, {y:.2f}) FL"
+            )
+            full = len(names.named[label]) >= count
+            if full:
+                break
+            rays = [r for r in rays if (r.movement, r.end, r.detection) not in h.keys]
+        if len(out.confirmed) == given:
+            _rebuild(names, label, final, poses, mapped, out)
+    return out if out.confirmed else None
+
+
+def _rebuild(
+    names: Lifecycle,
+    label: str,
+    final: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    mapped: Mapping[str, LandmarkEstimate],
+    out: MovementAssociation,
+) -> None:
+    """Give names of ``label`` under suspicion anew (:data:`REBUILD_SUSPECTS`): where their
+    detections and the ones the final map leaves unexplained meet (:func:`_final_point`, one
+    point per name at most), when the points explain :data:`REBUILD_GAIN` detections more
+    than the names do; each point gets the name nearest to it, unless within
+    :data:`FINAL_APART_CHI2` of it already."""
+    support = names.support
+    share = {n: _final_share(n, final, poses, mapped, names.model) for n in names.named[label]}
+    weakest = sorted(share, key=lambda n: (n in mapped, share[n]))  # unmapped: none given
+    doubtful = [n for n in names.named[label] if support[n].doubt() is not None]
+    suspects = [doubtful] if doubtful else []
+    suspects += [weakest[:k] for k in range(1, REBUILD_SUSPECTS + 1)]
+    for suspected in suspects:
+        rays = unexplained_rays(final, label, poses, suspected)
+        found: list[tuple[Hypothesis, int]] = []
+        while (
+            len(found) < len(suspected)
+            and (f := _final_point(names, label, rays, mapped, apart_from=suspected)) is not None
+        ):
+            found.append(f)
+            rays = [r for r in rays if (r.movement, r.end, r.detection) not in f[0].keys]
+        before = sum(d.name in suspected for d in final)
+        explained = sum(len(h.rays) for h, _ in found)
+        if explained >= before + REBUILD_GAIN:
+            break
+    else:
+        return
+    pairs = sorted(
+        (float(np.sum((h.point_fl - mapped[n].mean_fl) ** 2)) if n in mapped else np.inf, k, n)
+        for k, (h, _) in enumerate(found)
+        for n in suspected
+    )
+    given: dict[int, str] = {}
+    for _, k, n in pairs:
+        if k not in given and n not in given.values():
+            given[k] = n
+    given = {k: n for k, n in given.items() if not _stays(found[k][0], mapped.get(n))}
+    out.names.setdefault(label, ([], []))
+    for k, n in given.items():
+        h, lines = found[k]
+        x, y = h.point_fl
+        seen = (
+            f"given a detection at {100 * share[n]:.0f} % of the keyframes where predicted"
+            if n in mapped
+            else "not in the final map (its bearings never met at one point)"
+        )
+        why = (
+            f"{support[n].doubt() or seen}; given anew once the log was processed: "
+            f"with the detections the final map left unexplained, those of "
+            f"{', '.join(suspected)} meet at {len(found)} point(s), which explain "
+            f"{explained} detections against {before}; this one "
+            f"at ({x:.2f}, {y:.2f}) FL along {lines} lines of sight"
+        )
+        names.give_name(label, h, lines, out, searched=True, retract=n, why=why)
+
+
+def _final_point(
+    names: Lifecycle,
+    label: str,
+    rays: Sequence[Ray],
+    mapped: Mapping[str, LandmarkEstimate],
+    apart_from: Collection[str] = (),
+) -> tuple[Hypothesis, int] | None:
+    """Where ``rays`` (unexplained by the final map) meet as the search names a landmark:
+    :data:`~pipeline.association.lifecycle.DISCOVER_KEYFRAMES` keyframes,
+    :data:`~pipeline.association.lifecycle.DISCOVER_LINES` lines of sight over
+    :data:`~pipeline.association.lifecycle.DISCOVER_MOVEMENTS` movements, every ray within
+    eps, not a named landmark seen again (mostly its rays and within :data:`FINAL_APART_CHI2`
+    of it); the fitted point and its lines of sight, or None."""
+    eps, sigma = names.model.eps_rad, names.model.sigma_rad
+    met = meeting_point(rays, eps)
+    if met is None or len(met[1]) < DISCOVER_KEYFRAMES:
+        return None
+    h = fit(label, met[1], eps, sigma, met[0])
+    if h is None or (lines := h.lines_of_sight(names.distinct_rad)) < DISCOVER_LINES:
+        return None
+    if len({r.movement for r in h.rays}) < DISCOVER_MOVEMENTS:
+        return None
+    for n, e in names.known(label, mapped):
+        if n in apart_from:
+            continue
+        if _stays(h, e) and 2 * sum(ray_fits(r, e, sigma) for r in h.rays) > len(h.rays):
+            return None  # mostly bearings of a named landmark: that one, left unexplained
+    return h, lines
+
+
+def _stays(h: Hypothesis, e: LandmarkEstimate | None) -> bool:
+    """Whether ``h`` is within :data:`FINAL_APART_CHI2` of ``e`` (False: no ``e``)."""
+    if e is None:
+        return False
+    d = h.point_fl - e.mean_fl
+    return float(d @ np.linalg.solve(h.cov_fl + e.cov_fl, d)) <= FINAL_APART_CHI2
+
+
+def _final_share(
+    name: str,
+    final: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    mapped: Mapping[str, LandmarkEstimate],
+    model: BearingModel,
+) -> float:
+    """Share of the keyframes where the final map predicts ``name`` sharply enough to gate at
+    which the final association gave it a detection (1 when not in the map)."""
+    e = mapped.get(name)
+    if e is None or not poses:
+        return 1.0
+    predicted = 0
+    for p in poses.values():
+        _, std = predict_bearings(
+            p.origin_fl,
+            p.heading_rad,
+            e.mean_fl[None, :],
+            e.cov_fl[None, :, :],
+            bearing_var_rad=model.sigma_rad**2,
+            pose_cov=p.cov,
+        )
+        predicted += bool(std[0] <= MAX_PRED_STD_EPS * model.eps_rad)
+    return sum(d.name == name for d in final) / max(predicted, 1)

@@ -3,7 +3,8 @@
 A hypothesis starts from one detection at each keyframe of a straight movement whose rays meet
 ahead of both (the impartial PDF's two vision cones overlap); every pairing the cones allow is
 kept. Later keyframes add a ray when a detection falls in the hypothesis's gate and count a miss
-when none does.
+when none does. :func:`crossings` and :class:`RaySet` serve the search among unnamed
+detections; :func:`ray_fits` tells whether a ray is a bearing of a mapped landmark.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
-from pipeline.association.predict import ray_point_cov
+from pipeline.association.predict import GATE_CHI2, ray_point_cov
+from pipeline.estimate import LandmarkEstimate
 from pipeline.geometry import intersect_rays, solve_sym_2x2
 
 
@@ -215,3 +217,34 @@ class RaySet:
             if err[k] <= tol_rad:
                 out.append(self.rays[k])
         return out
+
+
+def crossings(rs: RaySet, index: int, min_parallax_rad: float) -> NDArray[np.float64]:
+    """Where each ray at O1 of movement ``index`` crosses each ray at its O2, ahead of both
+    with at least ``min_parallax_rad`` between them: points (c, 2) FL."""
+    a = np.flatnonzero(rs.frames == 2 * index)
+    b = np.flatnonzero(rs.frames == 2 * index + 1)
+    ua, ub = rs.units[a][:, None, :], rs.units[b][None, :, :]
+    cross = ua[..., 0] * ub[..., 1] - ua[..., 1] * ub[..., 0]
+    d = rs.origins_fl[b][None, :, :] - rs.origins_fl[a][:, None, :]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # parallel: no crossing
+        t1 = (d[..., 0] * ub[..., 1] - d[..., 1] * ub[..., 0]) / cross
+        t2 = (d[..., 0] * ua[..., 1] - d[..., 1] * ua[..., 0]) / cross
+    parallax = np.abs(wrap_rad(rs.dirs_rad[a][:, None] - rs.dirs_rad[b][None, :]))
+    ia, ib = np.nonzero((t1 > 0.0) & (t2 > 0.0) & (parallax >= min_parallax_rad))
+    out: NDArray[np.float64] = rs.origins_fl[a][ia] + t1[ia, ib][:, None] * rs.units[a][ia]
+    return out
+
+
+def ray_fits(r: Ray, e: LandmarkEstimate, sigma_rad: float) -> bool:
+    """Whether ray ``r`` is within the gate of the bearing of ``e`` predicted from its
+    keyframe (bearing noise std ``sigma_rad`` for the ray and for the bearings that placed
+    ``e``; first order, as :func:`~pipeline.association.predict.predict_bearings`, in
+    scalars: a few rays and landmarks at a time)."""
+    dx, dy = float(e.mean_fl[0]) - r.origin_fl[0], float(e.mean_fl[1]) - r.origin_fl[1]
+    r2 = max(dx * dx + dy * dy, 1e-12)
+    jx, jy = -dy / r2, dx / r2
+    c = e.cov_fl
+    var = jx * jx * c[0, 0] + 2 * jx * jy * c[0, 1] + jy * jy * c[1, 1] + 2 * sigma_rad**2
+    err = math.remainder(math.atan2(dy, dx) - r.direction_rad, math.tau)
+    return err * err <= GATE_CHI2 * float(var)

@@ -11,17 +11,25 @@ within eps of a landmark of their class, refines the best poses by least squares
 detections they match (:func:`pipeline.geometry.resect`), and keeps the best when it
 clearly beats every pose that tells another story (:data:`MATCH_LEAD`).
 :func:`place_left_out` places, once the log is processed, the movements the map left out.
+
+Association places each movement itself before the estimator does (:func:`place_movement`):
+chained on the end of the previous movement when that one was placed (one bearing at each
+keyframe suffices), else by resection (:func:`pipeline.geometry.resect`, four bearings at
+least); the associator falls back on :func:`match_movement` after a placed movement.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from pipeline.association.result import deg_text
+from pipeline.estimate import LandmarkEstimate
 from pipeline.geometry import (
     KeyframePose,
     MovementPose,
@@ -58,6 +66,8 @@ MATCH_MAX_LENGTH = 2.0
 MATCH_REFINE = 8
 #: The refined pose must fit the detections it matched to this robust residual (eps).
 MATCH_FIT_EPS = 2.0
+#: A placement whose robust residual exceeds this many eps is not trusted for association.
+PLACEMENT_MAX_EPS = 2.0
 
 
 @dataclass(frozen=True)
@@ -421,3 +431,114 @@ def place_left_out(
             break
         left = [m for m in left if m not in done]
     return out
+
+
+def place_movement(
+    bearings: tuple[Mapping[str, float], Mapping[str, float]],
+    points_fl: Mapping[str, NDArray[np.float64]],
+    after_fl: NDArray[np.float64] | None,
+    eps_rad: float,
+    sigma_rad: float,
+) -> tuple[MovementPose, float] | str:
+    """One movement placed from bearings of identified landmarks, for association.
+
+    Parameters
+    ----------
+    bearings : (dict, dict)
+        Bearings (rad) at O1 and at O2 of identified landmarks, by name.
+    points_fl : dict name -> (2,) float
+        Where the map has the identified landmarks (FL; the reference pair included).
+    after_fl : (2,) float or None
+        Where the previous movement ended, when it was placed (the robot turned in place
+        there): then the movement is chained on it when its bearings fit
+        (:data:`PLACEMENT_MAX_EPS`).
+    eps_rad, sigma_rad : float
+        Bearing error bound and bearing noise std, rad.
+
+    Returns
+    -------
+    (MovementPose, float) or str
+        The pose and O1's position std (FL), else why it cannot be placed.
+    """
+    pts, ends, bs = [], [], []
+    for end, bmap in enumerate(bearings):
+        for name, b in bmap.items():
+            if name in points_fl and math.isfinite(b):
+                pts.append(points_fl[name])
+                ends.append(end)
+                bs.append(float(b))
+    s = Sightings(np.array(pts, np.float64).reshape(-1, 2), np.array(ends, np.int64), np.array(bs))
+    n1, n2 = int((s.end == 0).sum()), int((s.end == 1).sum())
+    if after_fl is not None and n1 >= 1 and n2 >= 1:
+        chained = _place_chained(s, after_fl, sigma_rad)
+        if chained is not None:
+            r = s.residuals(pose_params(chained[0]))
+            if robust_std(r) <= PLACEMENT_MAX_EPS * eps_rad:
+                return chained
+    if not (n1 >= 1 and n2 >= 1 and n1 + n2 >= 4):
+        return f"too few bearings of mapped landmarks to place it ({n1} at O1, {n2} at O2)"
+    found = resect(s, guesses=[])
+    if found is None:
+        return "cannot be placed"
+    robust = robust_std(found.residuals_rad)
+    if robust <= PLACEMENT_MAX_EPS * eps_rad and math.isfinite(found.position_std_fl):
+        return found.pose, found.position_std_fl * sigma_rad
+    return f"placement does not fit the map (robust residual {deg_text(robust)})"
+
+
+def _place_chained(
+    s: Sightings, o1_fl: NDArray[np.float64], sigma_rad: float
+) -> tuple[MovementPose, float] | None:
+    """A movement that starts where the last one ended (the robot turns in place): heading
+    from the bearings at O1, length from those at O2 (weighted least squares along the
+    heading); None when the bearings at O2 do not fix the length."""
+    at1, at2 = s.end == 0, s.end == 1
+    d1 = s.points_fl[at1] - o1_fl
+    ang = np.arctan2(d1[:, 1], d1[:, 0]) - s.bearings_rad[at1]
+    heading = math.atan2(float(np.sin(ang).sum()), float(np.cos(ang).sum()))
+    u = np.array([math.cos(heading), math.sin(heading)])
+    p2 = s.points_fl[at2]
+    dirs = heading + s.bearings_rad[at2]
+    n = np.column_stack((-np.sin(dirs), np.cos(dirs)))
+    w = 1.0 / np.maximum(((p2 - o1_fl) ** 2).sum(axis=1), 1e-9)
+    nu = n @ u
+    den = float((w * nu**2).sum())
+    if den < 1e-6 * float(w.sum()):
+        return None
+    t = -float((w * nu * ((o1_fl - p2) * n).sum(axis=1)).sum()) / den
+    if not t > 1e-3:
+        return None
+    pos_std = sigma_rad / math.sqrt(den)
+    return MovementPose(np.asarray(o1_fl, np.float64), heading, t), pos_std
+
+
+def matching_map(
+    mapped: Mapping[str, LandmarkEstimate],
+    reference: tuple[str, str],
+    alike: Collection[str],
+    known: Sequence[tuple[str, LandmarkEstimate]],
+) -> tuple[NDArray[np.float64], list[str]]:
+    """The map to match detections with: points (k, 2) FL and their classes. The reference
+    pair, then each landmark of ``mapped`` of a class of its own (not one of the ``alike``
+    names) under its name, then ``known``: (class, estimate) of each named landmark of a
+    shared class."""
+    pts = [np.zeros(2), np.array([1.0, 0.0])]
+    labels = list(reference)
+    for n, e in mapped.items():
+        if n not in alike and n not in reference:
+            pts.append(e.mean_fl)
+            labels.append(n)
+    for label, e in known:
+        pts.append(e.mean_fl)
+        labels.append(label)
+    return np.array(pts, np.float64).reshape(-1, 2), labels
+
+
+def all_detections(
+    unique: Mapping[str, float],
+    per_class: Mapping[str, Sequence[float]],
+    known: Collection[str],
+) -> dict[str, Sequence[float]]:
+    """One keyframe's detections per class for matching: each identified bearing whose name is
+    in ``known`` as a class of its own, then the detections of the shared classes."""
+    return {**{n: [b] for n, b in unique.items() if n in known}, **per_class}

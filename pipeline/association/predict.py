@@ -1,17 +1,31 @@
-"""Predicted bearings of mapped points and their uncertainty (FL, rad)."""
+"""Predicted bearings of mapped points and their uncertainty (FL, rad).
+
+:func:`predict_bearings` and :func:`predict_ranges` are the first-order predictions;
+:class:`BearingModel` holds what association adds to them (the bearing noise of a detection
+and of the landmark's own bearings, the camera's view), and :func:`predict_named` predicts the
+named landmarks of one class from one keyframe for the per-movement assignment
+(:func:`pipeline.association.assign.assign_movement`).
+"""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from pipeline.crb import truncated_gaussian_std
+from pipeline.estimate import LandmarkEstimate
 
 #: A named landmark whose predicted bearing is less certain than this (std, in eps) is too
 #: poorly placed to gate detections: reported, left out of the assignment.
 MAX_PRED_STD_EPS = 2.0
+#: Chi-square gate, one degree of freedom, 99.9 % (a detection within it of a prediction is
+#: plausibly that landmark).
+GATE_CHI2 = 10.83
 
 
 def predict_bearings(
@@ -135,3 +149,121 @@ def ray_point_cov(
     iyy = float(w @ (dx * dx)) + 1e-9
     det = ixx * iyy - ixy * ixy
     return np.array([[iyy, -ixy], [-ixy, ixx]]) / det
+
+
+@dataclass(frozen=True)
+class BearingModel:
+    """How association predicts bearings: the bearing error bound, its noise, the camera's view.
+
+    Attributes
+    ----------
+    eps_rad : float
+        The bearing error bound eps.
+    field_of_view_rad : (lo, hi) or None
+        A pinhole camera's view, bearings of its right and left edges (rad, robot frame); None:
+        a panoramic camera.
+    """
+
+    eps_rad: float
+    field_of_view_rad: tuple[float, float] | None = None
+    sigma_rad: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sigma_rad", truncated_gaussian_std(self.eps_rad))
+
+    def predict(
+        self,
+        points_fl: NDArray[np.float64],
+        covs_fl: NDArray[np.float64],
+        origin_fl: NDArray[np.float64],
+        heading_rad: float | NDArray[np.float64],
+        pos_var_fl: float,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Predicted bearings (n,) of points (n, 2) with covariances (n, 2, 2) from a keyframe
+        whose position has variance ``pos_var_fl`` (FL^2) along any direction, and their stds:
+        :func:`predict_bearings` with the noise of the detection and of the bearings that placed
+        the point (``2 sigma^2``)."""
+        return predict_bearings(
+            origin_fl,
+            heading_rad,
+            points_fl,
+            covs_fl,
+            origin_var_fl=pos_var_fl,
+            bearing_var_rad=2.0 * self.sigma_rad**2,
+        )
+
+    def outside(self, pred: NDArray[np.float64], std: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Predictions (n,) outside the camera's view by more than their gate."""
+        return outside_view(pred, std, self.field_of_view_rad, n_std=math.sqrt(GATE_CHI2))
+
+    def vague(self, std: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Predictions (n,) too uncertain to gate detections (:data:`MAX_PRED_STD_EPS`)."""
+        out: NDArray[np.bool_] = std > MAX_PRED_STD_EPS * self.eps_rad
+        return out
+
+
+@dataclass(frozen=True)
+class Predicted:
+    """Named landmarks of one class predicted from one keyframe.
+
+    Attributes
+    ----------
+    names : list of str
+        The landmarks predicted sharply enough and in view: the ones the assignment takes.
+    bearing_rad, std_rad : (n,) float
+        Their predicted bearings (robot frame) and stds, rad.
+    range_fl, range_std_fl : (n,) float
+        Their predicted distances and stds (FL); NaN distance for a name not trusted to hide
+        others.
+    vague : list of (str, float)
+        Names predicted too uncertainly to gate, with the std (rad).
+    away : list of (str, float)
+        Names predicted outside the camera's view, with the bearing (rad).
+    """
+
+    names: list[str]
+    bearing_rad: NDArray[np.float64]
+    std_rad: NDArray[np.float64]
+    range_fl: NDArray[np.float64]
+    range_std_fl: NDArray[np.float64]
+    vague: list[tuple[str, float]] = field(default_factory=list)
+    away: list[tuple[str, float]] = field(default_factory=list)
+
+
+def predict_named(
+    known: Sequence[tuple[str, LandmarkEstimate]],
+    origin_fl: NDArray[np.float64],
+    heading_rad: float,
+    pos_var_fl: float,
+    model: BearingModel,
+    trusted: Collection[str],
+) -> Predicted:
+    """The bearings of named landmarks ``known`` (name, estimate in FL) from a keyframe at
+    ``origin_fl`` (2,) with heading ``heading_rad`` whose position has variance
+    ``pos_var_fl`` (FL^2); distances only for the ``trusted`` names (in the map and
+    confirmed: the ones that may hide others)."""
+    if not known:
+        empty = np.zeros(0)
+        return Predicted([], empty, empty, empty, empty)
+    pts = np.array([e.mean_fl for _, e in known])
+    covs = np.array([e.cov_fl for _, e in known])
+    pred, std = model.predict(pts, covs, origin_fl, heading_rad, pos_var_fl)
+    vague = model.vague(std)
+    away = model.outside(pred, std)
+    sharp = np.flatnonzero(~vague & ~away)
+    usable = [known[int(i)] for i in sharp]
+    range_fl, range_std_fl = predict_ranges(
+        origin_fl,
+        np.array([e.mean_fl for _, e in usable]),
+        np.array([e.cov_fl for _, e in usable]),
+        origin_var_fl=pos_var_fl,
+    )
+    return Predicted(
+        [n for n, _ in usable],
+        pred[sharp],
+        std[sharp],
+        np.where([n in trusted for n, _ in usable], range_fl, np.nan),
+        range_std_fl,
+        vague=[(known[int(k)][0], float(std[k])) for k in np.flatnonzero(vague)],
+        away=[(known[int(k)][0], float(pred[k])) for k in np.flatnonzero(away & ~vague)],
+    )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from data_schemas.colors import NOMINAL_BGR
 from data_schemas.session import Session, shared_classes
-from pipeline.association.tracker import slot_name
+from pipeline.association.result import slot_name
 
 ELLIPSE_RGB = (190, 150, 255)  # 80% regions: a hue no landmark class uses
 TRUTH_RGB = (240, 240, 240)

@@ -1,5 +1,5 @@
 """The search among unnamed detections: crossings of a movement's rays, and the count of
-keyframes whose rays pass near a point (``pipeline/association/tracker.py``)."""
+keyframes whose rays pass near a point (``pipeline/association/hypotheses.py``)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.association.hypotheses import Ray, RaySet
-from pipeline.association.tracker import _crossings
+from pipeline.association.hypotheses import Ray, RaySet, crossings
 
 EPS = math.radians(3.0)
 ANGLE = st.floats(-math.pi, math.pi, allow_nan=False)
@@ -47,7 +46,7 @@ def test_crossings_are_the_pairs_that_meet_ahead_with_parallax(
     expected = [
         p for a in rays[: len(at_o1)] for b in rays[len(at_o1) : -1] if (p := _crossing_ahead(a, b))
     ]
-    got = _crossings(RaySet(rays), 3, 2 * EPS)
+    got = crossings(RaySet(rays), 3, 2 * EPS)
     assert got.shape == (len(expected), 2)
     for p in expected:
         assert np.min(np.hypot(*(got - p).T)) <= 1e-6 * max(1.0, math.hypot(*p))

@@ -9,7 +9,7 @@ import math
 import pytest
 from alike_synthetic import run_synthetic
 
-from pipeline.association import tracker
+from pipeline.association import lifecycle
 
 # the package exports the function under the module's name
 assign_module = importlib.import_module("pipeline.association.assign")
@@ -170,7 +170,7 @@ def test_landmarks_the_hypotheses_never_name_are_found_from_their_unnamed_detect
     # in seed 4 (blue#8, 45 cm off, named with movement 13 along 4 lines of sight; every
     # landmark is seen at every keyframe here, so the point's class is always in its gate
     # before its naming): it is seen at none of its 12 predictions since, and reported doubtful
-    monkeypatch.setattr(tracker, "CONFIRM_POSITIONS", 99)
+    monkeypatch.setattr(lifecycle, "CONFIRM_POSITIONS", 99)
     run = run_synthetic(8, seed, capacity=9)
     matched = run.matched()
     assert len(set(matched.values())) == len(matched) >= 7
@@ -181,8 +181,8 @@ def test_landmarks_the_hypotheses_never_name_are_found_from_their_unnamed_detect
 
 def test_without_the_search_such_landmarks_stay_unnamed(monkeypatch: pytest.MonkeyPatch) -> None:
     # the same run with the search off names nothing: the test above tests the search
-    monkeypatch.setattr(tracker, "CONFIRM_POSITIONS", 99)
-    monkeypatch.setattr(tracker, "DISCOVER_KEYFRAMES", 10**6)
+    monkeypatch.setattr(lifecycle, "CONFIRM_POSITIONS", 99)
+    monkeypatch.setattr(lifecycle, "DISCOVER_KEYFRAMES", 10**6)
     run = run_synthetic(8, SEEDS[0], capacity=9)
     assert not run.estimates_fl
     assert any("blue unexplained" in r.unresolved for r in run.results)

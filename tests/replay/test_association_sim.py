@@ -248,7 +248,7 @@ def test_a_landmark_seen_from_a_narrow_fan_is_named_by_the_search(
     # distinct); no hypothesis gets the 4 lines of sight a name needs, so it stayed unnamed.
     # The search names it from 12 keyframes or more along 3 lines of sight when its class was
     # detected at 90 % of its predictions: all 8 named, on their landmarks, none doubtful.
-    from pipeline.association.tracker import DISCOVER_FAN_KEYFRAMES
+    from pipeline.association.lifecycle import DISCOVER_FAN_KEYFRAMES
 
     _, s = _simulated(camera, seed, tmp_path)
     assert s.n_named == 8 and len(set(s.matched.values())) == 8
