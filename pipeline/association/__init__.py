@@ -1,17 +1,18 @@
 """Association of detections of landmarks that look alike (several catalog landmarks share a
 colour or a band code) with the map, and new landmarks started from hypotheses.
 
-:class:`Associator` is the entry point: per movement it places the two keyframes from the
-landmarks whose class is their own (else, after a placed movement, by matching every detection
-with the map), predicts the bearing of every mapped landmark of a shared
-class with its uncertainty, gates and assigns detections one-to-one, starts hypotheses from
-detections no landmark explains, and confirms or drops them as movements arrive; once the log is
-processed it places the movements the map left out by matching and associates every keyframe
-again with the final map. Maths:
+:class:`Associator` (``tracker.py``) is the entry point and composes the steps. Per movement:
+placement for association (``match.py``), predictions of the named landmarks (``predict.py``),
+the gated one-to-one assignment of the movement's detections (``assign.py``:
+:func:`assign_movement` returns the :class:`MovementAssignment` record), then after the
+estimator the hypotheses' lifecycle, where landmarks are named (``lifecycle.py``), and the
+support of each name (``support.py``); what association did for the movement is a
+:class:`MovementAssociation` (``result.py``). Once the log is processed every keyframe is
+associated again with the final map and names are repaired (``final.py``). Maths:
 docs/method.md (association).
 """
 
-from pipeline.association.assign import Assignment, assign
+from pipeline.association.assign import Assignment, MovementAssignment, assign, assign_movement
 from pipeline.association.predict import predict_bearings, ray_point_cov
 from pipeline.association.result import MovementAssociation
 from pipeline.association.tracker import Associator, pose_between
@@ -19,8 +20,10 @@ from pipeline.association.tracker import Associator, pose_between
 __all__ = [
     "Assignment",
     "Associator",
+    "MovementAssignment",
     "MovementAssociation",
     "assign",
+    "assign_movement",
     "pose_between",
     "predict_bearings",
     "ray_point_cov",
