@@ -1,5 +1,6 @@
 """Gated one-to-one assignment: clear matches, refusals to guess, occlusion: the landmark
-clearly in front takes the blob, the ones behind are hidden."""
+clearly in front takes the blob, the ones behind are hidden; a movement's assignment and the
+detections it leaves for the hypotheses."""
 
 from __future__ import annotations
 
@@ -7,7 +8,16 @@ import math
 
 import numpy as np
 
-from pipeline.association import assign, predict_bearings, ray_point_cov
+from pipeline.association import (
+    MovementAssignment,
+    MovementAssociation,
+    assign,
+    assign_movement,
+    predict_bearings,
+    ray_point_cov,
+)
+from pipeline.association.predict import BearingModel, predict_named
+from pipeline.estimate import LandmarkEstimate
 
 DEG = math.pi / 180.0
 
@@ -126,3 +136,50 @@ def test_ray_point_cov_matches_the_spread_of_noisy_intersections() -> None:
         fixes.append(origins[0] + t[0] * u[0])
     emp = np.cov(np.array(fixes).T)
     assert np.linalg.norm(emp - cov) <= 0.1 * np.linalg.norm(cov)
+
+
+def test_a_movement_assignment_leaves_the_unexplained_and_contested_detections_free() -> None:
+    # one movement from (0, 0) to (1, 0), heading 0; blue#1 at (0.5, 1) and blue#2 at
+    # (0.5, -1) sharp, blue#3 far and vague (1 FL std at 4 FL); bearings by hand
+    eps = 3.0 * DEG
+    model = BearingModel(eps)
+    sharp, vague = 1e-6 * np.eye(2), np.eye(2)
+    known = [
+        ("blue#1", LandmarkEstimate(np.array([0.5, 1.0]), sharp)),
+        ("blue#2", LandmarkEstimate(np.array([0.5, -1.0]), sharp)),
+        ("blue#3", LandmarkEstimate(np.array([3.0, 3.0]), vague)),
+    ]
+    b1_at_o1 = math.atan2(1.0, 0.5)
+    b1_at_o2, b2_at_o2 = math.atan2(1.0, -0.5), math.atan2(-1.0, -0.5)
+    dets = {
+        "blue": (
+            np.array([b1_at_o1, 150.0 * DEG]),  # blue#1, and a blob no name explains
+            np.array([b1_at_o2, b2_at_o2 + 0.6 * DEG, b2_at_o2 - 0.6 * DEG]),  # two at blue#2
+        ),
+        "red": (np.zeros(0), np.zeros(0)),
+    }
+    predicted = {
+        "blue": tuple(
+            predict_named(known, np.array(o), 0.0, 0.0, model, trusted=())
+            for o in ((0.0, 0.0), (1.0, 0.0))
+        )
+    }
+    record = assign_movement(4, dets, predicted, in_line_rad=eps)  # type: ignore[arg-type]
+    assert record.free("blue") == ([1], [1, 2])
+    assert record.free("red") == ([], [])
+    assert MovementAssignment(4, dets).free("blue") == ([], [])  # not placed: nothing free
+    out = MovementAssociation(4, assignment=record)
+    out.report()
+    assert out.names == {
+        "blue": (["blue#1", None], ["blue#1", None, None]),
+        "red": ([], []),
+    }
+    assert out.bearings_o1_rad == {"blue#1": b1_at_o1}
+    assert out.bearings_o2_rad == {"blue#1": b1_at_o2}
+    assert out.outcomes == {
+        "blue#1": ["seen", "seen"],
+        "blue#2": ["missed", "contested"],
+        "blue#3": ["vague", "vague"],
+    }
+    assert {"blue#3@O1", "blue#3@O2", "blue@O2"} <= set(out.unresolved)
+    assert "blue#2@O1" in out.not_visible
