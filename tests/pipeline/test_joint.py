@@ -11,12 +11,14 @@ import numpy as np
 import pytest
 from alike_synthetic import run_synthetic
 
-import pipeline.joint.estimator as joint_estimator
+import pipeline.joint.placement as joint_placement
 from data_schemas.errors import EstimationError
 from pipeline.batch_ls import batch_least_squares
 from pipeline.estimators import make_estimator
 from pipeline.geometry import Sightings, intersect_rays, resect
+from pipeline.joint import robustness
 from pipeline.joint.estimator import JointSlam
+from pipeline.joint.graph import pose_key
 from pipeline.joint.noise import FLOOR_RAD, estimate_noise, posterior_variance
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import (
@@ -207,7 +209,7 @@ def test_a_map_that_stays_diverged_is_not_reported() -> None:
     for o in obs:
         results.append(slam.process_movement(o))
         if results[-1].status == "ok":  # whatever is reported fits its bearings
-            assert slam._misfit(EPS) == ""
+            assert robustness.misfit(slam._state, slam._map, EPS) == ""
     refused = [r for r in results if r.divergence]
     assert refused
     for r in refused:
@@ -249,7 +251,7 @@ def test_a_landmark_with_a_wrong_first_estimate_is_put_where_its_rays_meet(seed:
     assert max(err_cm.values()) < 25.0  # the far landmarks are 4 FL (1.9 m) from L1
     assert np.mean(list(err_cm.values())) < 10.0
     for name in err_cm:  # no landmark keeps most of its bearings out of the map
-        own = [b for b in slam._bearings() if b.landmark == name]
+        own = [b for b in slam._state.bearings() if b.landmark == name]
         assert sum(b in slam._state.rejected for b in own) <= len(own) / 2
 
 
@@ -257,9 +259,9 @@ def test_landmark_jump_is_detected() -> None:
     run = simulate_bearings(10, np.random.default_rng(5), eps_rad=EPS)
     slam = _joint(run, PAPER_REFERENCE, 5)
     before = slam.estimates
-    assert slam._jumped(before) == ""
+    assert robustness.jumped(slam._state, slam._map, before) == ""
     moved = {"L3": replace(before["L3"], mean_fl=np.add(before["L3"].mean_fl, [1.0, 0.0]))}
-    assert slam._jumped(moved).startswith("L3 jumped 1.000 FL")
+    assert robustness.jumped(slam._state, slam._map, moved).startswith("L3 jumped 1.000 FL")
 
 
 def test_single_keyframes_and_degenerate_reference_still_count() -> None:
@@ -511,17 +513,17 @@ def test_an_undetermined_movement_is_not_resected_again_for_nothing(
     same mapped landmarks they are judged at their last fit instead of being resected again,
     which changes no result."""
     calls = [0]
-    real = joint_estimator.resect
+    real = joint_placement.resect
 
     def counted(*args: object, **kwargs: object) -> object:
         calls[0] += 1
         return real(*args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(joint_estimator, "resect", counted)
+    monkeypatch.setattr(joint_placement, "resect", counted)
     runs = [(4, 9), (8, 0), (8, 1)]  # (landmarks, seed): runs with such movements
     cached = [run_synthetic(n, s).estimates_fl for n, s in runs]
     with_cache = calls[0]
-    monkeypatch.setattr(joint_estimator, "UNDETERMINED_MARGIN", math.inf)  # always resect
+    monkeypatch.setattr(joint_placement, "UNDETERMINED_MARGIN", math.inf)  # always resect
     calls[0] = 0
     fresh = [run_synthetic(n, s).estimates_fl for n, s in runs]
     assert calls[0] > with_cache + 50
@@ -662,7 +664,7 @@ def test_keyframe_poses_leave_out_a_keyframe_without_a_marginal() -> None:
     poses = slam.keyframe_poses()
     assert set(poses) == {(k, e) for k in slam.used_movements for e in (0, 1)}
     for k, e in poses:
-        mp = slam._movement_pose(k)
+        mp = slam._map.movement_pose(k)
         if e == 0:
             np.testing.assert_allclose(poses[k, 0].origin_fl, mp.o1_fl, atol=1e-12)
             assert poses[k, 0].heading_rad == pytest.approx(mp.heading_rad, abs=1e-12)
@@ -680,5 +682,5 @@ def test_keyframe_poses_leave_out_a_keyframe_without_a_marginal() -> None:
             return self.isam.marginalCovariance(key)  # type: ignore[attr-defined]
 
     first = slam.used_movements[0]
-    slam._isam = Failing(slam._isam, joint_estimator.g.pose_key(first, 1))  # type: ignore[assignment]
+    slam._map.isam = Failing(slam._map.isam, pose_key(first, 1))  # type: ignore[assignment]
     assert set(slam.keyframe_poses()) == set(poses) - {(first, 1)}

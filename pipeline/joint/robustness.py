@@ -1,0 +1,149 @@
+"""Robustness of the joint map: wrong detections out, wrong landmarks moved, divergence undone.
+
+After each update the bearings far from the map are taken out of the graph and rejected ones
+that fit again are put back (:func:`reject_outliers`); a landmark that lost most of its bearings
+that way is moved to where its rays meet (:func:`reseat_landmarks`). A map whose residuals are
+out of bounds or whose landmark jumped counts as diverged (:func:`divergence`); when
+re-initialization does not bring it back, the map returns to the :class:`Snapshot` taken before
+the movement (:func:`roll_back`). Every function takes the map's state and graph as arguments.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from data_schemas.angles import wrap_rad
+from pipeline.estimate import LandmarkEstimate
+from pipeline.geometry import intersect_rays, predicted_bearings, widest_std
+from pipeline.joint import graph as g
+from pipeline.joint.mapgraph import MIN_RAY_PARALLAX_EPS, MapGraph
+from pipeline.joint.noise import estimate_noise
+from pipeline.joint.state import MapState
+from pipeline.joint.table import by_landmark
+
+#: A landmark "jumps" when one update moves it by more than this (FL) ...
+JUMP_FL = 0.1
+#: ... and by more than this many standard deviations of its previous estimate.
+JUMP_SIGMAS = 5.0
+#: A bearing this many eps from the map is taken out of the graph (the error bound is eps).
+REJECT_EPS = 2.0
+#: A rejected bearing this close (eps) to the map is put back.
+READMIT_EPS = 1.5
+#: More than this fraction of the bearings beyond REJECT_EPS eps: the map is wrong, not them.
+MAX_REJECT_FRACTION = 0.1
+#: A landmark with at least this many rejected bearings, and more rejected than kept, is put
+#: where its rays meet (its first estimate was wrong, not its bearings).
+RESEAT_MIN_REJECTED = 3
+
+
+def reject_outliers(state: MapState, graph: MapGraph) -> None:
+    """Take out bearings beyond :data:`REJECT_EPS` eps of the map; put back rejected ones
+    within :data:`READMIT_EPS` eps.
+
+    The method's bearing error is bounded by eps, so a residual that far is a wrong
+    detection (the Huber loss only bounds its pull)."""
+    eps = graph.settings.eps_rad
+    r = np.abs(graph.residuals())
+    rejected = graph.table.rejected
+    out = graph.table.select(~rejected & (r > REJECT_EPS * eps))
+    back = graph.table.select(rejected & (r <= READMIT_EPS * eps))
+    if out or back:
+        graph.set_rejected(state, out, back)
+
+
+def reseat_landmarks(state: MapState, graph: MapGraph) -> list[str]:
+    """Landmarks moved to where their rays meet, when most of their bearings were rejected
+    (the landmark is wrong, not its bearings: it entered from a poor first estimate); the
+    map is then rebuilt with those bearings back in."""
+    settings, table = graph.settings, graph.table
+    eps = settings.eps_rad
+    skip = settings.reference_indices()
+    n_rows = by_landmark(table, np.ones(len(table), np.int64), skip)
+    n_rejected = by_landmark(table, table.rejected.astype(np.int64), skip)
+    values: gtsam.Values | None = None
+    moved = []
+    for j, out_j in n_rejected.items():
+        n_out = int(out_j.sum())
+        if n_out < RESEAT_MIN_REJECTED or n_out <= n_rows[j].size - n_out:
+            continue
+        name = settings.landmarks[j]
+        own = table.select(table.landmark == j)
+        poses = [graph.values.atPose2(g.pose_key(b.movement, b.end)) for b in own]
+        origins = np.array([(p.x(), p.y()) for p in poses], np.float64)
+        headings = np.array([p.theta() for p in poses], np.float64)
+        bearings = np.array([b.bearing_rad for b in own], np.float64)
+        fix = intersect_rays(origins, headings + bearings, REJECT_EPS * eps)
+        if fix is None or fix.parallax_rad < MIN_RAY_PARALLAX_EPS * eps:
+            continue
+        pts = np.repeat(fix.point_fl[None, :], len(own), axis=0)
+        r = wrap_rad(bearings - predicted_bearings(origins, headings, pts))
+        if int((np.abs(r) <= REJECT_EPS * eps).sum()) <= len(own) - n_out:
+            continue
+        if values is None:
+            values = gtsam.Values(graph.values)
+        values.update(graph.key(name), fix.point_fl)
+        state.rejected.difference_update(own)
+        table.set_rejected(own, False)
+        moved.append(name)
+    if values is not None:
+        graph.rebuild(state, values)
+    return moved
+
+
+def jumped(state: MapState, graph: MapGraph, before: dict[str, LandmarkEstimate]) -> str:
+    """Which landmark of the estimates ``before`` the last update moved by more than
+    :data:`JUMP_FL` and :data:`JUMP_SIGMAS` of its spread, and how far (empty if none did)."""
+    for name, prev in before.items():
+        if name not in state.in_graph:
+            continue
+        step = float(np.hypot(*(graph.point(name) - prev.mean_fl)))
+        spread = widest_std(prev.cov_fl)
+        if step > JUMP_FL and step > JUMP_SIGMAS * spread:
+            return f"{name} jumped {step:.3f} FL ({step / max(spread, 1e-12):.0f} sigma)"
+    return ""
+
+
+def misfit(state: MapState, graph: MapGraph, rms_limit_rad: float) -> str:
+    """Why the residuals are out of bounds: too many beyond :data:`REJECT_EPS` eps, or a
+    robust RMS over ``rms_limit_rad`` (empty if they are not)."""
+    settings = graph.settings
+    r = graph.residuals()
+    far = int((~graph.table.rejected & (np.abs(r) > REJECT_EPS * settings.eps_rad)).sum())
+    if far > max(1, MAX_REJECT_FRACTION * r.size):
+        return f"{far} of {r.size} bearings more than {REJECT_EPS:g} eps from the map"
+    noise = estimate_noise(r, state.n_params(), settings.sigma0_rad)
+    if noise.robust_rms_rad > rms_limit_rad:
+        limit = math.degrees(rms_limit_rad)
+        return f"robust residual RMS {math.degrees(noise.robust_rms_rad):.2f} deg > {limit:.2f}"
+    return ""
+
+
+def divergence(state: MapState, graph: MapGraph, before: dict[str, LandmarkEstimate]) -> str:
+    """Why the map looks diverged after an update from the estimates ``before`` (empty if it
+    does not): :func:`misfit` at the settings' divergence RMS, or :func:`jumped`."""
+    return misfit(state, graph, graph.settings.divergence_rms_rad) or jumped(state, graph, before)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The map before a movement: its state (a copy) and iSAM2's values then (never changed
+    in place)."""
+
+    state: MapState
+    values: gtsam.Values
+
+
+def snapshot(state: MapState, graph: MapGraph) -> Snapshot:
+    """The map as it is now, for :func:`roll_back`."""
+    return Snapshot(state.copy(), graph.values)
+
+
+def roll_back(snap: Snapshot, graph: MapGraph) -> MapState:
+    """The map as it was at ``snap``: its state (returned, to be used from now on) and its
+    graph rebuilt from the values then (empty without a placed movement)."""
+    graph.restore(snap.state, snap.values)
+    return snap.state
