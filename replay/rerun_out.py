@@ -13,7 +13,7 @@ from urllib.parse import quote, urlsplit
 import rerun as rr
 
 from data_schemas.errors import BslamError
-from data_schemas.mcap.followed import FollowedLog
+from data_schemas.mcap.follow import FollowedLog
 from data_schemas.mcap.open import LogSource, MessageLog, entered, log_path
 from data_schemas.outputs import OutputGuard, create_new, pipe_into
 from replay.blueprint import method_blueprint
@@ -199,7 +199,7 @@ def save_rrd(
     """Replay ``log`` (a path, or a log already opened or followed) into the file ``rrd``.
 
         A finished log is replayed into a file beside ``rrd`` that is renamed into place on return.
-        A log being followed (:class:`data_schemas.mcap.followed.FollowedLog`) is written to ``rrd``
+        A log being followed (:class:`data_schemas.mcap.follow.FollowedLog`) is written to ``rrd``
     directly,
         so that what was read is kept however the log ends.
 

@@ -4,7 +4,7 @@
 (:mod:`replay.records`) to sinks. It reads frames, ``/robot/movement`` and the simulator's
 truth in one pass, as they come, so a finished log
 (:class:`data_schemas.mcap.processable.ProcessableLog`) and a log still being written
-(:class:`data_schemas.mcap.followed.FollowedLog`) go through the same code. Frames are decoded only
+(:class:`data_schemas.mcap.follow.FollowedLog`) go through the same code. Frames are decoded only
 where a
 sink needs them (keyframes for the estimate; every frame for Rerun).
 A movement is processed once its end keyframe and its end message have arrived; one that

@@ -1,7 +1,7 @@
 """One way in to reading a log: :func:`open_log`, and what every reader gives (:class:`MessageLog`).
 
 A finished log opens as :class:`data_schemas.mcap.processable.ProcessableLog`, a log still being
-written (``follow=True``) as :class:`data_schemas.mcap.followed.FollowedLog`; both are a
+written (``follow=True``) as :class:`data_schemas.mcap.follow.FollowedLog`; both are a
 :class:`MessageLog`. Functions that take "a path, or a log already open" resolve it with
 :func:`log_path` and :func:`entered`, nowhere else.
 """
@@ -15,8 +15,7 @@ from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import Literal, Protocol, overload
 
-from data_schemas.mcap.follow import IDLE_TIMEOUT_S
-from data_schemas.mcap.followed import FollowedLog
+from data_schemas.mcap.follow import IDLE_TIMEOUT_S, FollowedLog
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
 from data_schemas.session import Session
@@ -49,6 +48,7 @@ def open_log(
     follow: Literal[False] = False,
     skip_corrupt: bool = False,
     idle_timeout_s: float = IDLE_TIMEOUT_S,
+    warn: bool = True,
 ) -> ProcessableLog: ...
 
 
@@ -59,6 +59,7 @@ def open_log(
     follow: Literal[True],
     skip_corrupt: bool = False,
     idle_timeout_s: float = IDLE_TIMEOUT_S,
+    warn: bool = True,
 ) -> FollowedLog: ...
 
 
@@ -68,11 +69,14 @@ def open_log(
     follow: bool = False,
     skip_corrupt: bool = False,
     idle_timeout_s: float = IDLE_TIMEOUT_S,
+    warn: bool = True,
 ) -> ProcessableLog | FollowedLog:
     """Open a log to read: finished, or (``follow``) still being written.
 
     A finished log's ignored channels and skipped chunks (``skip_corrupt``) are warned about on
-    the ``bslam.logs`` logger. ``idle_timeout_s`` (seconds) applies to a followed log only.
+    the ``bslam.logs`` logger, unless ``warn`` is False (a look at a log that the run itself
+    opens again, such as counting its movements for a progress bar). ``idle_timeout_s``
+    (seconds) applies to a followed log only.
 
     Raises
     ------
@@ -83,6 +87,8 @@ def open_log(
     if follow:
         return FollowedLog(path, idle_timeout_s=idle_timeout_s)
     opened = ProcessableLog(path, skip_corrupt=skip_corrupt)
+    if not warn:
+        return opened
     for note in opened.notes:
         _LOG.warning(note)
     for damage in opened.skipped:

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from data_schemas.errors import BslamError
+from data_schemas.mcap.open import open_log
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.read import LogMessage
 from data_schemas.mcap.window import Bound, LogWindow
@@ -98,7 +99,7 @@ def split_log(
     guard = OutputGuard([log], force=force)
     for out in outs:
         guard.claim(out, what="part of the log")
-    with ProcessableLog(log) as source:
+    with open_log(log) as source:
         cuts = [_cut_ns(source, b) for b in at]
         if any(b <= a for a, b in itertools.pairwise(cuts)):
             raise PartsError(
@@ -176,7 +177,7 @@ def merge_logs(
     guard = OutputGuard(logs, force=force)
     guard.claim(out, what="merged log")
     with contextlib.ExitStack() as stack:
-        opened = [stack.enter_context(ProcessableLog(log)) for log in logs]
+        opened = [stack.enter_context(open_log(log)) for log in logs]
         doc = _session_doc(opened)
         _check_no_overlap(opened)
         staged = stack.enter_context(guard.staged(out))

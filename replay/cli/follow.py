@@ -9,7 +9,7 @@ import click
 from data_schemas.mcap.follow import IDLE_TIMEOUT_S
 
 if TYPE_CHECKING:
-    from data_schemas.mcap.followed import FollowedLog
+    from data_schemas.mcap.follow import FollowedLog
 
 
 def follow_options(fn: click.decorators.FC) -> click.decorators.FC:

@@ -91,7 +91,7 @@ def replay(
     from replay.extras import require_viewer
 
     require_viewer("bslam replay")
-    from data_schemas.mcap.followed import FollowedLog
+    from data_schemas.mcap.follow import FollowedLog
     from data_schemas.mcap.open import open_log
     from data_schemas.mcap.processable import ProcessableLog
     from data_schemas.mcap.window import LogWindow

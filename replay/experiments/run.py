@@ -148,10 +148,10 @@ def simulate(scenario: dict[str, Any], log: Path, *, seed: int) -> None:
 
 def read_log_plan(log: Path) -> MovementPlan:
     """The movement plan of a log (keyframes, commanded turns, driven distances, true poses)."""
-    from data_schemas.mcap.processable import ProcessableLog
+    from data_schemas.mcap.open import open_log
     from replay.plan import read_plan
 
-    with ProcessableLog(log) as opened:
+    with open_log(log) as opened:
         return read_plan(opened)
 
 

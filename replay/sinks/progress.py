@@ -14,7 +14,7 @@ from typing import Any
 from tqdm import tqdm
 
 from data_schemas.errors import BslamError
-from data_schemas.mcap.processable import ProcessableLog
+from data_schemas.mcap.open import open_log
 from data_schemas.mcap.window import LogWindow, WindowedLog
 from data_schemas.registry import MOVEMENT_TOPIC
 from replay.records import AssociationRecord, FrameRecord, MovementRecord, RunInfo
@@ -30,7 +30,7 @@ def progress_bar(**kwargs: Any) -> tqdm[Any]:
 def movement_count(log: str | os.PathLike[str], window: LogWindow | None = None) -> int | None:
     """How many movements end in ``log`` (within ``window``); None if it cannot tell."""
     try:
-        with ProcessableLog(log) as opened:
+        with open_log(log, warn=False) as opened:
             source = WindowedLog(opened, window) if window else opened
             return sum(
                 bool(m.decode()["phase"] == "end") for m in source.messages([MOVEMENT_TOPIC])

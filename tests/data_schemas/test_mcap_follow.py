@@ -1,4 +1,5 @@
-"""Following a growing MCAP log: whole chunks only, waits, ends on the footer or idle time-out."""
+"""Following a growing MCAP log: the session, then whole chunks only; waits, ends on the footer
+or the idle time-out."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from mcap.records import Channel, Schema
 
 from data_schemas.errors import LogError, NotMcapError
 from data_schemas.mcap.chunks import McapChunkWriter
-from data_schemas.mcap.follow import LogFollower
+from data_schemas.mcap.follow import FollowedLog
 from data_schemas.mcap.layout import MAGIC
 from tests.mcap_reader import LogReader
 
@@ -49,11 +50,8 @@ def _offline(path: Path) -> list[tuple[str, int, int, bytes]]:
         return [(m.topic, m.log_time_ns, m.sequence, m.data) for m in reader.messages()]
 
 
-def _followed(follower: LogFollower) -> list[tuple[str, int, int, bytes]]:
-    return [
-        (f.topic, f.message.log_time, f.message.sequence, f.message.data)
-        for f in follower.messages()
-    ]
+def _followed(follower: FollowedLog) -> list[tuple[str, int, int, bytes]]:
+    return [(m.topic, m.log_time_ns, m.sequence, m.data) for m in follower.messages()]
 
 
 def _chunk_ends(path: Path) -> list[int]:
@@ -71,7 +69,7 @@ def _chunk_ends(path: Path) -> list[int]:
 
 
 def test_finished_log_gives_every_message_and_ends_finished(log: Path) -> None:
-    with LogFollower(log, idle_timeout_s=5) as follower:
+    with FollowedLog(log, idle_timeout_s=5) as follower:
         assert "bslam.session" in follower.metadata
         assert _followed(follower) == _offline(log)
         assert follower.end == "finished"
@@ -101,7 +99,7 @@ def test_growing_file_with_partial_chunks_is_followed_to_the_footer(
     writer = threading.Thread(target=grow)
     writer.start()
     try:
-        with LogFollower(out, idle_timeout_s=3, poll_s=0.01) as follower:
+        with FollowedLog(out, idle_timeout_s=3, poll_s=0.01) as follower:
             got = _followed(follower)
             assert follower.end == "finished"
     finally:
@@ -116,7 +114,7 @@ def test_unfinished_log_ends_after_idle_timeout_with_a_clear_line(
     out = tmp_path / "killed.mcap"
     out.write_bytes(log.read_bytes()[: ends[1] + 11])  # two chunks and a torn third
     t0 = time.monotonic()
-    with LogFollower(out, idle_timeout_s=0.4, poll_s=0.01) as follower:
+    with FollowedLog(out, idle_timeout_s=0.4, poll_s=0.01) as follower:
         got = _followed(follower)
     waited = time.monotonic() - t0
     assert follower.end == "idle"
@@ -127,20 +125,19 @@ def test_unfinished_log_ends_after_idle_timeout_with_a_clear_line(
 
 
 def test_missing_file_times_out(tmp_path: Path) -> None:
-    follower = LogFollower(tmp_path / "none.mcap", idle_timeout_s=0.2, poll_s=0.01)
     with pytest.raises(LogError, match=r"did not appear within 0\.2 s"):
-        _ = follower.metadata
+        FollowedLog(tmp_path / "none.mcap", idle_timeout_s=0.2, poll_s=0.01)
 
 
 def test_not_mcap_and_empty_logs(tmp_path: Path) -> None:
     text = tmp_path / "text.mcap"
     text.write_text("hello, this is not a log\n")
     with pytest.raises(NotMcapError):
-        _ = LogFollower(text, idle_timeout_s=0.2).metadata
+        FollowedLog(text, idle_timeout_s=0.2)
     empty = tmp_path / "empty.mcap"
     empty.write_bytes(b"")
     with pytest.raises(LogError, match=r"has not grown for 0\.2 s.*no session yet"):
-        _ = LogFollower(empty, idle_timeout_s=0.2, poll_s=0.01).metadata
+        FollowedLog(empty, idle_timeout_s=0.2, poll_s=0.01)
 
 
 def test_damaged_chunk_is_reported_after_the_good_ones(log: Path, tmp_path: Path) -> None:
@@ -149,7 +146,7 @@ def test_damaged_chunk_is_reported_after_the_good_ones(log: Path, tmp_path: Path
     data[ends[1] - 20] ^= 0xFF  # a byte inside the second chunk's records: CRC mismatch
     out = tmp_path / "damaged.mcap"
     out.write_bytes(bytes(data))
-    follower = LogFollower(out, idle_timeout_s=0.5)
+    follower = FollowedLog(out, idle_timeout_s=0.5)
     got = []
     with pytest.raises(LogError, match=r"chunk at byte \d+ is damaged"):
         for message in follower.messages():
@@ -158,19 +155,37 @@ def test_damaged_chunk_is_reported_after_the_good_ones(log: Path, tmp_path: Path
 
 
 @pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
-def test_chunks_of_another_writer_are_followed(tmp_path: Path, compression: str) -> None:
+def test_chunks_of_another_writer_are_followed(log: Path, tmp_path: Path, compression: str) -> None:
+    # mcap's own Writer: small chunks, compressed or not, schemas and channels in the chunks
     from mcap.writer import CompressionType, Writer
 
     out = tmp_path / f"{compression}.mcap"
-    with out.open("wb") as f:
-        writer = Writer(f, chunk_size=200, compression=CompressionType[compression.upper()])
+    with LogReader(SOURCE) as reader, out.open("wb") as f:
+        writer = Writer(f, chunk_size=2000, compression=CompressionType[compression.upper()])
         writer.start()
-        schema = writer.register_schema("s", "jsonschema", b"{}")
-        channel = writer.register_channel("/t", "json", schema)
-        for i in range(40):
-            writer.add_message(channel, log_time=i, data=b'{"i": %d}' % i, publish_time=i)
+        for name, values in reader.metadata.items():
+            writer.add_metadata(name, values)
+        schema_ids: dict[int, int] = {}
+        channel_ids: dict[int, int] = {}
+        for record in reader.raw_records():
+            if isinstance(record, Schema):
+                schema_ids[record.id] = writer.register_schema(
+                    record.name, record.encoding, record.data
+                )
+            elif isinstance(record, Channel):
+                channel_ids[record.id] = writer.register_channel(
+                    record.topic, record.message_encoding, schema_ids[record.schema_id]
+                )
+            else:
+                writer.add_message(
+                    channel_ids[record.channel_id],
+                    log_time=record.log_time,
+                    data=record.data,
+                    publish_time=record.publish_time,
+                    sequence=record.sequence,
+                )
         writer.finish()
-    with LogFollower(out, idle_timeout_s=1) as follower:
-        got = [(m.topic, m.schema, m.message.log_time, m.message.data) for m in follower.messages()]
+    with FollowedLog(out, idle_timeout_s=1) as follower:
+        got = _followed(follower)
         assert follower.end == "finished" and follower.chunk_count > 3
-    assert got == [("/t", "s", i, b'{"i": %d}' % i) for i in range(40)]
+    assert got == _offline(SOURCE) and got

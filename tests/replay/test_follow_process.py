@@ -8,7 +8,7 @@ import pytest
 from viewer import needs_viewer
 
 from data_schemas.errors import UnknownSchemaError
-from data_schemas.mcap.followed import FollowedLog
+from data_schemas.mcap.follow import FollowedLog
 from data_schemas.mcap.processable import ProcessableLog
 from replay.process import process_log
 from replay.records import MethodConfig

@@ -248,3 +248,23 @@ def test_hand_built_layout(small_log: Path, tmp_path: Path, original_doc: dict[s
     again = log_summary(fixed)
     assert again.indexed and again.message_count == s.message_count
     assert [a.name for a in again.attachments] == ["note.txt"]
+
+
+def test_open_log_warns_of_a_foreign_channel_unless_told_not_to(
+    small_log: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    import logging
+
+    from data_schemas.mcap.open import open_log
+
+    path = tmp_path / "chatter.mcap"
+    LAYOUTS["foreign-channel"](small_log, path)
+    expected = "chatter.mcap: channel /chatter (schema 'std_msgs/String') is not bearing-slam's"
+    with caplog.at_level(logging.WARNING, logger="bslam.logs"):
+        with open_log(path) as opened:
+            assert "/chatter" not in opened.topics
+        assert [r.getMessage() for r in caplog.records] == [f"{expected}: ignored"]
+        caplog.clear()
+        with open_log(path, warn=False) as opened:  # a second look: the run warns once
+            assert "/chatter" not in opened.topics and opened.notes
+        assert caplog.records == []

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from data_schemas.mcap.followed import FollowedLog
+from data_schemas.mcap.follow import FollowedLog
 from replay.cli import cli
 from replay.process import process_log
 from replay.records import MethodConfig, MovementRecord
