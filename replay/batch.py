@@ -11,12 +11,15 @@ import glob
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from data_schemas.errors import LogError
 from data_schemas.mcap.window import LogWindow
 from data_schemas.outputs import OutputGuard
 from replay.records import MethodConfig
+
+if TYPE_CHECKING:
+    from replay.sinks.summary import RunSummary
 
 DERIVED_SUFFIX = ".derived.mcap"
 SUMMARY_SUFFIX = ".summary.json"
@@ -109,8 +112,9 @@ def plan_jobs(
     return jobs
 
 
-def process_job(job: LogJob) -> dict[str, Any]:
-    """Process one log; return its summary document (a module-level function, for pools)."""
+def process_job(job: LogJob) -> RunSummary:
+    """Process one log; return its summary (a module-level function, for pools: the summary
+    is plain data, pickled back from a worker process or a Dask worker)."""
     from replay.process import process_log
 
     return process_log(

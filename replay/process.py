@@ -12,9 +12,8 @@ from data_schemas.mcap.open import LogSource, MessageLog, entered, log_path
 from data_schemas.mcap.processable import ProcessableLog
 from data_schemas.mcap.window import LogWindow, WindowedLog, WindowError
 from data_schemas.outputs import OutputGuard
-from pipeline.slam import MovementStatus, Placement
 from replay.records import MethodConfig, Sink
-from replay.sinks.summary import SummarySink
+from replay.sinks.summary import AssociationOutcome, RunSummary, SummarySink
 from replay.stages import run_log
 
 _FLAT_LIST = re.compile(r"\[\s+([^\[\]{}]*?)\s+\]")
@@ -44,8 +43,8 @@ def process_log(
     force: bool = False,
     skip_corrupt: bool = False,
     window: LogWindow | None = None,
-) -> dict[str, Any]:
-    """Process one log; return its summary document.
+) -> RunSummary:
+    """Process one log; return its summary (the document: :meth:`RunSummary.to_json`).
 
     Parameters
     ----------
@@ -78,7 +77,7 @@ def process_log(
     for path, what in ((out, "derived log"), (summary, "summary")):
         if path is not None:
             guard.claim(path, what=what)
-    summary_sink = SummarySink()
+    summary_sink = SummarySink(window)
     sinks: list[Sink] = [summary_sink, *extra_sinks]
     with contextlib.ExitStack() as stack:
         opened = entered(log, stack, skip_corrupt=skip_corrupt)
@@ -89,13 +88,10 @@ def process_log(
 
             sinks.append(DerivedLogSink(stack.enter_context(guard.staged(out))))
         run_log(opened, method, sinks)
-    if window:
-        summary_sink.document["window"] = {
-            k: str(b) for k, b in (("from", window.start), ("to", window.end)) if b is not None
-        }
+    result = summary_sink.summary
     if summary is not None:
-        write_json(summary, summary_sink.document, guard)
-    return summary_sink.document
+        write_json(summary, result.to_json(), guard)
+    return result
 
 
 def windowed(log: MessageLog, window: LogWindow) -> WindowedLog:
@@ -113,72 +109,63 @@ def windowed(log: MessageLog, window: LogWindow) -> WindowedLog:
     return WindowedLog(log, window)
 
 
-def result_line(doc: dict[str, Any]) -> str:
+def result_line(summary: RunSummary) -> str:
     """One line about a processed log: movements used, landmarks mapped, error if known."""
-    moves = doc["movements"]
-    used = sum(1 for m in moves if m["status"] == MovementStatus.OK)
-    resected = sum(1 for m in moves if m.get("placement") == Placement.RESECTION)
-    text = f"{used}/{len(moves)} movements used"
-    if resected:
-        text += f" ({resected} placed by resection)"
-    pair = f"{doc['frame']['origin']}, {doc['frame']['x_axis']}"  # fixed in FL, never "mapped"
-    text += f", {len(doc['landmarks'])} landmarks mapped besides the reference pair {pair}"
-    if "bearing_noise_deg" in doc:
-        text += f", bearing noise {doc['bearing_noise_deg']:.2f} deg"
-    if "mean_error_m" in doc:
-        text += f", mean error {100 * doc['mean_error_m']:.1f} cm"
-    assoc = doc.get("association")
-    if assoc:
-        named = ", ".join(
-            f"{label} {len(assoc['named'].get(label, []))}/{n}"
-            for label, n in assoc["catalog_count"].items()
+    text = f"{summary.used}/{summary.movements} movements used"
+    if summary.resected:
+        text += f" ({summary.resected} placed by resection)"
+    pair = ", ".join(summary.reference)  # fixed in FL, never "mapped"
+    text += f", {summary.landmarks} landmarks mapped besides the reference pair {pair}"
+    if summary.bearing_noise_deg is not None:
+        text += f", bearing noise {summary.bearing_noise_deg:.2f} deg"
+    if summary.mean_error_m is not None:
+        text += f", mean error {100 * summary.mean_error_m:.1f} cm"
+    if summary.association is not None:
+        text += _association_text(summary.association)
+    if summary.untrusted:
+        text += f"; the map is NOT trustworthy: {'; '.join(summary.untrusted)}"
+    return text
+
+
+def _association_text(assoc: AssociationOutcome) -> str:
+    """The result line's part on the landmarks that look alike."""
+    named = ", ".join(
+        f"{label} {assoc.names_given.get(label, 0)}/{n}" for label, n in assoc.catalog_count.items()
+    )
+    text = f"; alike landmarks named: {named}"
+    if assoc.detections:
+        share = 100 * assoc.detections_named / assoc.detections
+        text += f", {share:.0f} % of {assoc.detections} detections"
+    final = assoc.final
+    if final is not None and final.detections:
+        matched = final.placed_by_matching
+        also = f", movement(s) {', '.join(map(str, matched))} placed by matching" if matched else ""
+        text += f" ({100 * final.explained / final.detections:.0f} % with the final map{also})"
+    if assoc.movements_with_unresolved:
+        text += f" ({len(assoc.movements_with_unresolved)} movement(s) with ambiguities)"
+    if final is not None and final.named_at_end:
+        text += (
+            f"; with the final map, {', '.join(final.named_at_end)} named where detections no "
+            "name explained meet"
         )
-        text += f"; alike landmarks named: {named}"
-        counts = assoc.get("detections", {}).values()
-        seen = sum(c["at_keyframes"] for c in counts)
-        if seen:
-            text += f", {100 * sum(c['named'] for c in counts) / seen:.0f} % of {seen} detections"
-        final = assoc.get("final_map", {})
-        if sum(c["detections"] for c in final.values()):
-            share = sum(c["named"] + c["in line"] for c in final.values()) / sum(
-                c["detections"] for c in final.values()
-            )
-            matched = assoc.get("placed_by_matching", [])
-            also = (
-                f", movement(s) {', '.join(map(str, matched))} placed by matching"
-                if matched
-                else ""
-            )
-            text += f" ({100 * share:.0f} % with the final map{also})"
-        if assoc["movements_with_unresolved"]:
-            text += f" ({len(assoc['movements_with_unresolved'])} movement(s) with ambiguities)"
-        found = [n for c in final.values() for n in c.get("named_at_end", {})]
-        if found:
-            text += (
-                f"; with the final map, {', '.join(found)} named where detections no name "
-                "explained meet"
-            )
-        retracted = [n for c in final.values() for n in c.get("retracted", {})]
-        if retracted:
-            text += (
-                f"; with the final map, {', '.join(retracted)} given anew where the "
-                "detections no name explained point (under suspicion before)"
-            )
-        missing = [label for label, c in final.items() if "warning" in c]
-        if missing:
-            text += (
-                f"; with the final map, {', '.join(missing)}: detections no name explains "
-                "(a landmark may be missing)"
-            )
-        if assoc.get("doubtful"):
-            text += (
-                f"; doubtful: {', '.join(assoc['doubtful'])} "
-                "(seen too rarely where predicted, or bearings that scatter)"
-            )
-        if assoc.get("unconfirmed"):
-            names = ", ".join(assoc["unconfirmed"])
-            text += f"; unconfirmed: {names} (seen too few times since named to tell)"
-    trust = doc.get("trust")
-    if trust is not None and not trust["trustworthy"]:
-        text += f"; the map is NOT trustworthy: {'; '.join(trust['reasons'])}"
+    if final is not None and final.retracted:
+        text += (
+            f"; with the final map, {', '.join(final.retracted)} given anew where the "
+            "detections no name explained point (under suspicion before)"
+        )
+    if final is not None and final.missing:
+        text += (
+            f"; with the final map, {', '.join(final.missing)}: detections no name explains "
+            "(a landmark may be missing)"
+        )
+    if assoc.doubtful:
+        text += (
+            f"; doubtful: {', '.join(assoc.doubtful)} "
+            "(seen too rarely where predicted, or bearings that scatter)"
+        )
+    if assoc.unconfirmed:
+        text += (
+            f"; unconfirmed: {', '.join(assoc.unconfirmed)} "
+            "(seen too few times since named to tell)"
+        )
     return text

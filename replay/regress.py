@@ -317,7 +317,7 @@ def run_regression(
     for case in todo:
         doc = expected[case.expected]
         method = MethodConfig(estimator=case.estimator) if doc is None else method_of(doc)
-        actual = process_log(case.log, method)
+        actual = process_log(case.log, method).to_json()
         if update or doc is None:
             write_json(case.expected, actual)
             result = CaseResult(case, "written", [])

@@ -20,6 +20,7 @@ from replay.blueprint import method_blueprint
 from replay.process import process_log
 from replay.records import PRIORS, MethodConfig, Sink
 from replay.sinks.rerun_sink import RerunSink
+from replay.sinks.summary import RunSummary
 
 APPLICATION_ID = "bearing-slam"
 
@@ -173,8 +174,8 @@ def replay_log(
     summary: str | os.PathLike[str] | None = None,
     force: bool = False,
     extra_sinks: tuple[Sink, ...] = (),
-) -> dict[str, Any]:
-    """Stream every stage of ``log`` to ``rec`` (and Fig. 1); return the summary document.
+) -> RunSummary:
+    """Stream every stage of ``log`` to ``rec`` (and Fig. 1); return its summary.
 
     ``out`` and ``summary``, if given, also receive the derived log and the summary JSON
     (existing ones replaced only with ``force``). ``live``: frames are sent with each movement
@@ -195,7 +196,7 @@ def save_rrd(
     force: bool = False,
     skip_corrupt: bool = False,
     **kw: Any,
-) -> dict[str, Any]:
+) -> RunSummary:
     """Replay ``log`` (a path, or a log already opened or followed) into the file ``rrd``.
 
         A finished log is replayed into a file beside ``rrd`` that is renamed into place on return.

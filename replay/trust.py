@@ -12,6 +12,7 @@ result, not an error: ``bslam process`` says it and exits 0.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 #: This many movements skipped because their bearings did not fit the map make it doubtful.
@@ -66,7 +67,8 @@ def _collapsed(doc: dict[str, Any]) -> list[str]:
     return out
 
 
-def trust_entry(doc: dict[str, Any]) -> dict[str, Any]:
-    """The summary's ``trust`` entry: ``trustworthy`` and, when not, ``reasons``."""
-    reasons = trust_reasons(doc)
+def trust_entry(reasons: Sequence[str]) -> dict[str, Any]:
+    """The summary's ``trust`` entry from :func:`trust_reasons`: ``trustworthy`` and, when not,
+    ``reasons``."""
+    reasons = list(reasons)
     return {"trustworthy": not reasons, **({"reasons": reasons} if reasons else {})}

@@ -48,7 +48,7 @@ from data_schemas.inputs import open_fd
 from data_schemas.mcap.compression import MAX_CHUNK_BYTES, decompress
 from data_schemas.mcap.layout import MAGIC, RECORD_HEADER
 from data_schemas.mcap.processable import check_calibration, check_channel
-from data_schemas.mcap.read import LogMessage
+from data_schemas.mcap.read import IDLE_TIMEOUT_S, LogMessage
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
 from data_schemas.shape import brief
@@ -61,9 +61,6 @@ _U64 = struct.Struct("<Q")
 _MESSAGE_HEAD = struct.Struct("<HIQQ")
 
 FollowEnd = Literal["finished", "idle"]
-#: Default seconds without growth before following stops (the recorder closes a chunk at least
-#: every 0.5 s while it writes, and it writes while the robot moves or is polled).
-IDLE_TIMEOUT_S = 10.0
 #: The largest chunk or metadata record read whole (bytes): a chunk's limit and its header.
 MAX_RECORD_BYTES = MAX_CHUNK_BYTES + 4096
 #: A record of a chunk: a schema, a channel, or a message.

@@ -15,9 +15,9 @@ from collections.abc import Collection, Iterator
 from pathlib import Path
 from typing import Literal, Protocol, overload
 
-from data_schemas.mcap.follow import IDLE_TIMEOUT_S, FollowedLog
+from data_schemas.mcap.follow import FollowedLog
 from data_schemas.mcap.processable import ProcessableLog
-from data_schemas.mcap.read import LogMessage
+from data_schemas.mcap.read import IDLE_TIMEOUT_S, LogMessage
 from data_schemas.session import Session
 
 _LOG = logging.getLogger("bslam.logs")

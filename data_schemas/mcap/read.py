@@ -2,7 +2,8 @@
 
 :class:`LogMessage` is what :class:`data_schemas.mcap.open.MessageLog` readers yield;
 :func:`unfinished_line` and :func:`corrupt_log_line` are the one wording of an unfinished and of
-a corrupt log (``bslam recover`` rewrites what is left).
+a corrupt log (``bslam recover`` rewrites what is left); :data:`IDLE_TIMEOUT_S` is how long a
+log being followed may stay still (a light module: the CLI's ``--help`` reads it).
 """
 
 from __future__ import annotations
@@ -20,6 +21,9 @@ from data_schemas.shape import check_shape
 
 Source = str | os.PathLike[str] | IO[bytes]
 
+#: Default seconds without growth before following a log stops (the recorder closes a chunk at
+#: least every 0.5 s while it writes, and it writes while the robot moves or is polled).
+IDLE_TIMEOUT_S = 10.0
 #: Damage that an interrupted recording leaves (the file just ends): "unfinished", not corrupt.
 CUT_END = frozenset({"cut chunk", "file end"})
 

@@ -81,11 +81,12 @@ def demo(out_dir: Path, seed: int, omni: bool, force: bool, estimator: str) -> N
             extra_sinks=(ProgressSink(total=sim.trajectory.n_moves),),
         )
     click.echo(f"map: {result_line(doc)}")
-    l1, l2 = doc["frame"]["origin"], doc["frame"]["x_axis"]
+    l1, l2 = doc.reference
     click.echo(f"landmarks in FL, the map frame: {l1} at (0, 0), {l2} at (1, 0), unit |{l1} {l2}|")
-    for name, est in doc["landmarks"].items():
+    document = doc.to_json()
+    for name, est in document["landmarks"].items():
         x, y = est["mean"]
-        err = doc.get("error_m", {}).get(name)
+        err = document.get("error_m", {}).get(name)
         more = "" if err is None else f"  (error {100 * err:.1f} cm)"
         click.echo(f"  {name} at ({x:+.3f}, {y:+.3f}) in FL{more}")
     click.echo("results:")

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from data_schemas.mcap.follow import IDLE_TIMEOUT_S
+from data_schemas.mcap.read import IDLE_TIMEOUT_S
 
 if TYPE_CHECKING:
     from data_schemas.mcap.follow import FollowedLog

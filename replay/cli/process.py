@@ -7,7 +7,7 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import click
 
@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from data_schemas.mcap.window import Bound
     from replay.batch import LogJob
     from replay.records import MethodConfig
+    from replay.sinks.summary import RunSummary
 
 
 class _WarningEcho(logging.Handler):
@@ -138,7 +139,7 @@ def process(
                 extra_sinks=(ProgressSink.for_log(paths[0], window),),
             )
         if out is None and summary is None:
-            click.echo(dumps(doc))
+            click.echo(dumps(doc.to_json()))
         else:
             click.echo(f"{paths[0]}: {result_line(doc)}")
         return
@@ -169,7 +170,7 @@ def _process_followed(
             log, method, out=out, summary=summary, extra_sinks=(TerminalView(),), force=force
         )
     if out is None and summary is None:
-        click.echo(dumps(doc))
+        click.echo(dumps(doc.to_json()))
     else:
         click.echo(f"{logs[0]}: {result_line(doc)}")
     end_of_follow(log)
@@ -183,7 +184,7 @@ def _process_many(jobs: list[LogJob], workers: int, scheduler: str | None) -> No
     from replay.parallel import Outcome, run_tasks
     from replay.process import result_line
 
-    def report(outcome: Outcome[dict[str, Any]]) -> None:
+    def report(outcome: Outcome[RunSummary]) -> None:
         log = jobs[outcome.index].log
         if outcome.value is not None:
             tqdm.write(f"{log}: {result_line(outcome.value)}", file=sys.stdout)

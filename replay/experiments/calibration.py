@@ -69,7 +69,7 @@ def observe_run(family: str, seed: int) -> tuple[dict[str, Any], list[MovementOb
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / f"{family}_{seed}.mcap"
         simulate(doc, log, seed=seed)
-        summary = process_log(log, MethodConfig(seed=seed, estimator="paper"))
+        summary = process_log(log, MethodConfig(seed=seed, estimator="paper")).to_json()
         plan = read_log_plan(log)
     observations = [
         replace(o, turn_rad=plan.turns_rad.get(o.index), distance_m=plan.distances_m.get(o.index))

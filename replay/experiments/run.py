@@ -70,7 +70,7 @@ def run_one(task: RunTask) -> RunOutput:
     method = MethodConfig(
         prior="impartial", n_r=proto.n_r, n_l=proto.n_l, seed=task.seed, estimator="paper"
     )
-    summary = process_log(log, method, summary=log.with_suffix(".summary.json"))
+    summary = process_log(log, method, summary=log.with_suffix(".summary.json")).to_json()
     out.seconds["process"] = time.perf_counter() - tick
 
     tick = time.perf_counter()

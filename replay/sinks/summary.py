@@ -30,20 +30,29 @@ out, placed for that association by matching their detections with the final map
 simulated logs, ``matched_truth``
 (each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
 measured against it). ``trust`` says whether the map is ``trustworthy`` and, when not, the
-``reasons`` (:mod:`replay.trust`).
+``reasons`` (:mod:`replay.trust`); with ``--from``/``--to`` the document ends with the
+``window`` processed.
+
+The sink also gives the run's outcome as data, :class:`RunSummary` (what the result line
+says), built from the same records as the document; :meth:`RunSummary.to_json` is the document.
+It is plain data, so it comes back whole from worker processes and Dask.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from data_schemas.mcap.window import LogWindow
 from data_schemas.session import shared_classes
+from pipeline.association.final import Status
+from pipeline.slam import Placement
 from replay.records import (
     AssociationRecord,
     EstimateRecord,
@@ -51,10 +60,109 @@ from replay.records import (
     MovementRecord,
     RunInfo,
 )
-from replay.trust import trust_entry
+from replay.trust import trust_entry, trust_reasons
 from replay.truth import class_of_name, errors_m, match_truth
 
 DIGITS = 9
+
+
+@dataclass(frozen=True)
+class FinalAssociation:
+    """The keyframe detections of shared classes associated again with the final map.
+
+    Attributes
+    ----------
+    detections, explained : int
+        Those detections, and how many of them the final map names or finds in line.
+    placed_by_matching : tuple of int
+        Movements the map left out, placed for this association by matching.
+    named_at_end, retracted : tuple of str
+        Names given then: free ones, and ones taken back from another landmark.
+    missing : tuple of str
+        Classes whose detections the final map leaves unexplained (a landmark may be missing).
+    """
+
+    detections: int
+    explained: int
+    placed_by_matching: tuple[int, ...]
+    named_at_end: tuple[str, ...]
+    retracted: tuple[str, ...]
+    missing: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class AssociationOutcome:
+    """What association did with the landmarks that look alike (shared colour classes).
+
+    Attributes
+    ----------
+    names_given : dict of str to int
+        Per class, the names the final map holds (``red#k``).
+    catalog_count : dict of str to int
+        Per class, the landmarks the catalog has.
+    detections, detections_named : int
+        Blobs of those classes at keyframes, and how many of them got a name (then or later).
+    movements_with_unresolved : tuple of int
+        Movements that left something unresolved.
+    doubtful, unconfirmed : tuple of str
+        Names still doubtful, or not yet seen often enough to tell, after the last movement
+        (sorted).
+    final : FinalAssociation or None
+        The association with the final map, if it ran.
+    """
+
+    names_given: dict[str, int]
+    catalog_count: dict[str, int]
+    detections: int
+    detections_named: int
+    movements_with_unresolved: tuple[int, ...]
+    doubtful: tuple[str, ...]
+    unconfirmed: tuple[str, ...]
+    final: FinalAssociation | None
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """One processed log: what the result line says, and the summary document.
+
+    Attributes
+    ----------
+    movements : int
+        Movements in the log (or its window).
+    used : int
+        Movements that updated the map.
+    resected : int
+        Of those, movements placed by resection (joint estimator).
+    reference : tuple of str
+        The reference pair (origin, x axis): the frame FL, not mapped.
+    landmarks : int
+        Landmarks mapped besides the reference pair.
+    bearing_noise_deg : float or None
+        Bearing noise estimated by the joint estimator, degrees.
+    mean_error_m : float or None
+        Mean distance of the estimates to the truth (simulated logs), metres.
+    association : AssociationOutcome or None
+        With landmarks that look alike.
+    untrusted : tuple of str
+        Why the map is not trustworthy (empty: it is).
+    document : dict
+        The summary document (``docs/replay.md``); read it with :meth:`to_json`.
+    """
+
+    movements: int
+    used: int
+    resected: int
+    reference: tuple[str, str]
+    landmarks: int
+    bearing_noise_deg: float | None = None
+    mean_error_m: float | None = None
+    association: AssociationOutcome | None = None
+    untrusted: tuple[str, ...] = ()
+    document: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary document (JSON types only)."""
+        return self.document
 
 
 def _num(x: float) -> float:
@@ -88,13 +196,25 @@ def _method(run: RunInfo) -> dict[str, Any]:
 
 
 class SummarySink:
-    """Builds the summary document; read it from :attr:`document` after ``finish``."""
+    """Builds the summary: :attr:`summary` (or :attr:`document`) once the run is finished.
+
+    Parameters
+    ----------
+    window : LogWindow, optional
+        The part of the log processed (``--from`` / ``--to``), recorded in the document.
+    """
 
     wants_all_frames = False
     wants_images = False
 
-    def __init__(self) -> None:
+    def __init__(self, window: LogWindow | None = None) -> None:
         self.document: dict[str, Any] = {}
+        self._window = window
+        self._summary: RunSummary | None = None
+        self._used = 0
+        self._resected = 0
+        self._unresolved: list[int] = []
+        self._association: AssociationOutcome | None = None
         self._run: RunInfo | None = None
         self._landmarks: dict[str, Any] = {}
         self._errors_m: dict[str, float] = {}
@@ -149,6 +269,8 @@ class SummarySink:
                 for name, (b1, b2) in record.bearings_rad.items()
             },
         }
+        self._used += record.ok
+        self._resected += record.placement == Placement.RESECTION
         if record.skipped_landmarks:
             entry["skipped_landmarks"] = dict(record.skipped_landmarks)
         if record.placement:
@@ -171,6 +293,7 @@ class SummarySink:
             self._reinitializations += 1
         if record.ambiguous_landmarks:
             entry["ambiguous_landmarks"] = dict(record.ambiguous_landmarks)
+            self._unresolved.append(record.index)
         if record.not_visible:
             entry["not_visible"] = dict(record.not_visible)
         if record.named_landmarks:
@@ -240,13 +363,46 @@ class SummarySink:
             self._association_summary(self._run)
         if self._unit_m is not None:
             self.document["map_unit_m"] = _num(self._unit_m)
+        noise_deg = mean_error_m = None
         if self._noise_rad is not None:
-            self.document["bearing_noise_deg"] = round(math.degrees(self._noise_rad), 6)
+            noise_deg = round(math.degrees(self._noise_rad), 6)
+            self.document["bearing_noise_deg"] = noise_deg
             self.document["reinitializations"] = self._reinitializations
         if self._errors_m:
+            mean_error_m = _num(float(np.mean(list(self._errors_m.values()))))
             self.document["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}
-            self.document["mean_error_m"] = _num(float(np.mean(list(self._errors_m.values()))))
-        self.document["trust"] = trust_entry(self.document)
+            self.document["mean_error_m"] = mean_error_m
+        reasons = trust_reasons(self.document)
+        self.document["trust"] = trust_entry(reasons)
+        if self._window:
+            bounds = (("from", self._window.start), ("to", self._window.end))
+            self.document["window"] = {k: str(b) for k, b in bounds if b is not None}
+        reference = self.document["frame"]["origin"], self.document["frame"]["x_axis"]
+        self._summary = RunSummary(
+            movements=len(self.document["movements"]),
+            used=self._used,
+            resected=self._resected,
+            reference=reference,
+            landmarks=len(self._landmarks),
+            bearing_noise_deg=noise_deg,
+            mean_error_m=mean_error_m,
+            association=self._association,
+            untrusted=tuple(reasons),
+            document=self.document,
+        )
+
+    @property
+    def summary(self) -> RunSummary:
+        """The run's summary (once :meth:`finish` has run).
+
+        Raises
+        ------
+        RuntimeError
+            The run has not finished.
+        """
+        if self._summary is None:
+            raise RuntimeError("the summary is complete only once the run has finished")
+        return self._summary
 
     def _association_summary(self, run: RunInfo) -> None:
         """Per shared class: the names given, how many movements left something unresolved."""
@@ -260,12 +416,11 @@ class SummarySink:
             )
             for label in shared
         }
-        moves = self.document["movements"]
-        unresolved = [m["index"] for m in moves if m.get("ambiguous_landmarks")]
+        catalog_count = {label: len(v) for label, v in shared.items()}
         self.document["association"] = {
             "named": named,
-            "catalog_count": {label: len(v) for label, v in shared.items()},
-            "movements_with_unresolved": unresolved,
+            "catalog_count": catalog_count,
+            "movements_with_unresolved": list(self._unresolved),
             "detections": {
                 label: {
                     "at_keyframes": self._blobs.get(label, 0),
@@ -302,3 +457,31 @@ class SummarySink:
             self.document["association"]["unconfirmed"] = dict(sorted(self._unconfirmed.items()))
         if self._matched:
             self.document["association"]["matched_truth"] = dict(sorted(self._matched.items()))
+        self._association = AssociationOutcome(
+            names_given={label: len(names) for label, names in named.items()},
+            catalog_count=catalog_count,
+            detections=sum(self._blobs.get(label, 0) for label in shared),
+            detections_named=sum(self._named_blobs.get(label, 0) for label in shared),
+            movements_with_unresolved=tuple(self._unresolved),
+            doubtful=tuple(sorted(self._doubtful)),
+            unconfirmed=tuple(sorted(self._unconfirmed)),
+            final=None if self._final is None else _final_association(self._final),
+        )
+
+
+def _final_association(final: AssociationRecord) -> FinalAssociation:
+    """The typed form of the final association, class by class in the order of
+    :meth:`AssociationRecord.counts` (the order of the summary's ``final_map``)."""
+    labels = list(final.counts())
+
+    def given(names: Mapping[str, str]) -> tuple[str, ...]:
+        return tuple(n for label in labels for n in names if class_of_name(n) == label)
+
+    return FinalAssociation(
+        detections=len(final.detections),
+        explained=sum(d.status in (Status.NAMED, Status.IN_LINE) for d in final.detections),
+        placed_by_matching=tuple(final.placed_by_matching),
+        named_at_end=given(final.named_at_end),
+        retracted=given(final.retracted),
+        missing=tuple(label for label in labels if label in final.reports),
+    )

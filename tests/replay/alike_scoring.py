@@ -26,7 +26,7 @@ from replay.records import (
     MovementRecord,
     RunInfo,
 )
-from replay.sinks.summary import SummarySink
+from replay.sinks.summary import RunSummary, SummarySink
 from replay.stages import run_log
 from replay.truth import match_truth
 
@@ -68,7 +68,8 @@ class Score:
     one; those associated: named, or one blob where named landmarks line up; those associated
     right; those associated with the nearest in bearing).
     ``errors_m`` is measured on the final map (after names retracted once the log was
-    processed), ``errors_last_m`` on the last movement's.
+    processed), ``errors_last_m`` on the last movement's. ``result``: the run's summary, as the
+    result line reads it.
     """
 
     n_correct: int
@@ -85,6 +86,7 @@ class Score:
     n_final_correct: int
     n_final_nearest: int
     errors_last_m: dict[str, float]
+    result: RunSummary
 
     @property
     def correct_share(self) -> float:
@@ -191,4 +193,5 @@ def score_log(log: Path, method: MethodConfig | None = None) -> Score:
         final_correct,
         final_nearest,
         errors_last,
+        summary.summary,
     )

@@ -14,7 +14,7 @@ from replay.records import MethodConfig
 
 
 def test_api_and_cli_make_the_same_map(small_log: Path, tmp_path: Path) -> None:
-    api = process_log(small_log, MethodConfig())
+    api = process_log(small_log, MethodConfig()).to_json()
     result = CliRunner().invoke(
         cli, ["process", str(small_log), "--summary", str(tmp_path / "s.json")]
     )
@@ -25,5 +25,5 @@ def test_api_and_cli_make_the_same_map(small_log: Path, tmp_path: Path) -> None:
     assert by_cli["landmarks"] == api["landmarks"]  # the same floats, not merely close
     # the distance prior (the default that once differed) changes this log's map: the
     # comparison above would see a default that differed
-    free = process_log(small_log, MethodConfig(distance_prior=None))
+    free = process_log(small_log, MethodConfig(distance_prior=None)).to_json()
     assert free["landmarks"]["L3"]["mean"] != api["landmarks"]["L3"]["mean"]

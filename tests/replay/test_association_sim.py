@@ -307,8 +307,8 @@ def test_names_off_their_landmark_are_reported_doubtful(
     assert set(_retracted_at_end(s)) == off and max(s.errors_m.values()) <= 0.10
     final_doubtful = s.summary["association"]["doubtful"]
     assert set(final_doubtful) == set(doubtful) - off
-    assert f"doubtful: {', '.join(sorted(final_doubtful))}" in result_line(s.summary)
-    assert f"with the final map, {', '.join(sorted(off))} given anew" in result_line(s.summary)
+    assert f"doubtful: {', '.join(sorted(final_doubtful))}" in result_line(s.result)
+    assert f"with the final map, {', '.join(sorted(off))} given anew" in result_line(s.result)
     # and in Rerun: the final map labels the doubtful names, the log says why (read back
     # with Rerun's reader)
     last, rows = _replayed(log, tmp_path)
@@ -344,7 +344,7 @@ def test_names_the_search_found_off_their_landmark_are_reported_doubtful(
     assert set(_retracted_at_end(s)) == {"blue#2"}
     final_doubtful = s.summary["association"]["doubtful"]
     assert set(final_doubtful) == off - {"blue#2"}
-    assert f"doubtful: {', '.join(sorted(final_doubtful))}" in result_line(s.summary)
+    assert f"doubtful: {', '.join(sorted(final_doubtful))}" in result_line(s.result)
     last, rows = _replayed(log, tmp_path)
     labelled = {n.removesuffix(" (doubtful)") for n in last if n.endswith(" (doubtful)")}
     assert labelled == set(final_doubtful)
@@ -368,7 +368,7 @@ def test_names_whose_bearings_scatter_are_reported_doubtful(camera: str, tmp_pat
     final_doubtful = set(s.summary["association"].get("doubtful", {}))
     assert final_doubtful | set(_retracted_at_end(s)) == off
     if final_doubtful:
-        assert f"doubtful: {', '.join(sorted(final_doubtful))}" in result_line(s.summary)
+        assert f"doubtful: {', '.join(sorted(final_doubtful))}" in result_line(s.result)
 
 
 @pytest.mark.slow
@@ -393,7 +393,7 @@ def test_names_seen_too_few_times_to_tell_are_reported_unconfirmed(
     assert late and late <= set(unconfirmed) and "doubtful" not in s.summary["association"]
     assert len(unconfirmed) <= len(late) + 1 and s.n_named == 8
     assert all("keyframe(s) since it was named" in why for why in unconfirmed.values())
-    assert f"unconfirmed: {', '.join(sorted(unconfirmed))}" in result_line(s.summary)
+    assert f"unconfirmed: {', '.join(sorted(unconfirmed))}" in result_line(s.result)
     for name in late:
         flagged = [m["index"] for m in moves if name in m.get("unconfirmed_landmarks", {})]
         assert flagged[0] == named_at[name] and flagged[-1] == moves[-1]["index"]

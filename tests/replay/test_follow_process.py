@@ -22,9 +22,9 @@ METHOD = MethodConfig(n_l=150, seed=7)
 def test_followed_finished_log_gives_the_offline_result(name: str) -> None:
     path = REGRESS / f"{name}.mcap"
     with ProcessableLog(path) as log:
-        offline = process_log(log, METHOD)
+        offline = process_log(log, METHOD).to_json()
     with FollowedLog(path, idle_timeout_s=2) as log:
-        followed = process_log(log, METHOD)
+        followed = process_log(log, METHOD).to_json()
         assert log.end == "finished"
     assert followed == offline
     assert any(m["status"] == "ok" for m in offline["movements"])
@@ -88,11 +88,11 @@ def test_movement_messages_out_of_the_recorders_order(
     small_log: Path, tmp_path: Path, shift: str
 ) -> None:
     # the recorder writes a movement message right after its keyframe; other writers may not
-    expected = process_log(small_log, METHOD)
+    expected = process_log(small_log, METHOD).to_json()
     log = _reordered(small_log, tmp_path / f"{shift}.mcap", shift)
     for opened in (ProcessableLog(log), FollowedLog(log, idle_timeout_s=2)):
         with opened:
-            doc = process_log(opened, METHOD)
+            doc = process_log(opened, METHOD).to_json()
         assert doc["movements"] == expected["movements"]
         assert doc["landmarks"] == expected["landmarks"]
     assert sum(m["status"] == "ok" for m in expected["movements"]) >= 2

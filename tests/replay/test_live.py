@@ -69,13 +69,13 @@ def test_follower_beside_a_simulation_gives_the_offline_result(tmp_path: Path) -
     try:
         sink = _Arrivals(recorder)
         with FollowedLog(out, idle_timeout_s=5) as log:
-            followed = process_log(log, METHOD, extra_sinks=(sink,))
+            followed = process_log(log, METHOD, extra_sinks=(sink,)).to_json()
             assert log.end == "finished"
     finally:
         assert recorder.wait(30) == 0, recorder.stderr.read() if recorder.stderr else ""
     assert len(sink.while_recording) == 10
     assert sink.while_recording[0], "the follower only started after the recording ended"
-    assert process_log(out, METHOD) == followed
+    assert process_log(out, METHOD).to_json() == followed
 
 
 def test_killed_recording_ends_the_follower_with_a_clear_line(tmp_path: Path) -> None:
@@ -115,7 +115,9 @@ def test_killing_the_live_follower_does_not_disturb_the_recording(tmp_path: Path
     assert err.count("live view stopped (follower exit -9); the recording goes on") == 1
     plain = _simulate(tmp_path / "b" / "s.mcap")
     assert plain.wait(60) == 0
-    docs: list[dict[str, Any]] = [process_log(tmp_path / d / "s.mcap", METHOD) for d in "ab"]
+    docs: list[dict[str, Any]] = [
+        process_log(tmp_path / d / "s.mcap", METHOD).to_json() for d in "ab"
+    ]
     assert docs[0] == docs[1]
     assert len(docs[0]["movements"]) == 10
 

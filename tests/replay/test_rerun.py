@@ -45,7 +45,7 @@ def replayed(
     result = CliRunner().invoke(cli, ["replay", str(small_log), "--save", str(rrd), "--n-l", "100"])
     assert result.exit_code == 0, result.output
     assert f"rerun {rrd}" in result.output
-    return rrd, process_log(small_log, MethodConfig(n_l=100))
+    return rrd, process_log(small_log, MethodConfig(n_l=100)).to_json()
 
 
 def _column(rows: list[dict[str, Any]], name: str) -> list[Any]:

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 from replay.process import result_line
+from replay.sinks.summary import AssociationOutcome, FinalAssociation, RunSummary
 from replay.trust import trust_entry, trust_reasons
 
 
@@ -22,9 +24,7 @@ def _doc(statuses: list[str], association: dict[str, Any] | None = None) -> dict
 def test_a_map_nothing_doubts_is_trustworthy() -> None:
     doc = _doc(["ok"] * 9 + ["skipped: too few bearings of mapped landmarks"])
     assert trust_reasons(doc) == []
-    assert trust_entry(doc) == {"trustworthy": True}
-    doc["trust"] = trust_entry(doc)
-    assert "NOT trustworthy" not in result_line(doc)
+    assert trust_entry(trust_reasons(doc)) == {"trustworthy": True}
 
 
 def test_a_map_collapsed_onto_the_robot_is_not_trustworthy() -> None:
@@ -68,11 +68,50 @@ def test_each_sign_of_a_wrong_map_is_a_reason() -> None:
         "doubtful name(s) blue#4",
         "unconfirmed name(s) blue#2, blue#7",
     ]
-    entry = trust_entry(doc)
-    assert entry["trustworthy"] is False and len(entry["reasons"]) == 3
-    doc["trust"] = entry
-    line = result_line(doc)
-    assert line.endswith(
-        "; the map is NOT trustworthy: detections of blue that no name explains; "
-        "doubtful name(s) blue#4; unconfirmed name(s) blue#2, blue#7"
+    entry = trust_entry(trust_reasons(doc))
+    assert entry == {"trustworthy": False, "reasons": trust_reasons(doc)}
+
+
+def test_the_result_line_says_what_the_summary_holds() -> None:
+    plain = RunSummary(
+        movements=10, used=9, resected=2, reference=("L1", "L2"), landmarks=3, mean_error_m=0.0123
+    )
+    assert result_line(plain) == (
+        "9/10 movements used (2 placed by resection), 3 landmarks mapped besides the reference "
+        "pair L1, L2, mean error 1.2 cm"
+    )
+    alike = AssociationOutcome(
+        names_given={"blue": 3},
+        catalog_count={"blue": 8, "red": 2},
+        detections=40,
+        detections_named=30,
+        movements_with_unresolved=(4, 6),
+        doubtful=("blue#4",),
+        unconfirmed=(),
+        final=FinalAssociation(
+            detections=80,
+            explained=60,
+            placed_by_matching=(0,),
+            named_at_end=(),
+            retracted=("blue#5",),
+            missing=("blue",),
+        ),
+    )
+    untrusted = replace(
+        plain,
+        resected=0,
+        mean_error_m=None,
+        bearing_noise_deg=0.456,
+        association=alike,
+        untrusted=("doubtful name(s) blue#4", "the map collapsed"),
+    )
+    assert result_line(untrusted) == (
+        "9/10 movements used, 3 landmarks mapped besides the reference pair L1, L2, bearing "
+        "noise 0.46 deg; alike landmarks named: blue 3/8, red 0/2, 75 % of 40 detections "
+        "(75 % with the final map, movement(s) 0 placed by matching) (2 movement(s) with "
+        "ambiguities); with the final map, blue#5 given anew where the detections no name "
+        "explained point (under suspicion before); with the final map, blue: detections no "
+        "name explains (a landmark may be missing); doubtful: blue#4 (seen too rarely where "
+        "predicted, or bearings that scatter); the map is NOT trustworthy: doubtful name(s) "
+        "blue#4; the map collapsed"
     )
