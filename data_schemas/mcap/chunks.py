@@ -55,7 +55,16 @@ Bytes = bytes | bytearray | memoryview
 
 
 def serialise(record: McapRecord) -> bytes:
-    """One MCAP record (opcode, length, body) as bytes."""
+    """One MCAP record (opcode, length, body) as bytes.
+
+    Through mcap's documented record API (``McapRecord.write`` into a
+    ``mcap.data_stream.RecordBuilder``, the same in mcap 1.2.2 and 1.6.0). mcap's public
+    ``Writer`` cannot serve here: it writes whole files, copies each message several times, and
+    cannot write a chunk with its message indexes in one ``write`` that the writer then flushes
+    and ``fsync``s (what keeps an interrupted recording readable up to its last chunk). So chunk
+    records are laid out by hand (:meth:`McapChunkWriter.close_chunk`), and only the small
+    records go through this function.
+    """
     builder = RecordBuilder()
     record.write(builder)
     data: bytes = builder.end()  # type: ignore[no-untyped-call]
