@@ -46,19 +46,21 @@ from data_schemas.errors import (
 )
 from data_schemas.inputs import open_fd
 from data_schemas.mcap.compression import MAX_CHUNK_BYTES, decompress
-from data_schemas.mcap.layout import MAGIC, RECORD_HEADER
+from data_schemas.mcap.layout import (
+    CHUNK_FIELDS,
+    MAGIC,
+    MESSAGE_FIELDS,
+    MESSAGE_HEADER,
+    RECORD_HEADER,
+)
 from data_schemas.mcap.processable import check_calibration, check_channel
 from data_schemas.mcap.read import IDLE_TIMEOUT_S, LogMessage
 from data_schemas.registry import SESSION_METADATA_NAME
 from data_schemas.session import Session, session_from_metadata
 from data_schemas.shape import brief
 
-#: Chunk body up to its compression name: start and end time, records size, CRC, name length;
-#: the records' length (u64) follows the name.
-_CHUNK_HEAD = struct.Struct("<QQQII")
+_U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
-#: Message body up to its data: channel id, sequence, log time, publish time.
-_MESSAGE_HEAD = struct.Struct("<HIQQ")
 
 FollowEnd = Literal["finished", "idle"]
 #: The largest chunk or metadata record read whole (bytes): a chunk's limit and its header.
@@ -324,9 +326,10 @@ def _chunk_records(body: bytes) -> list[_ChunkRecord]:
         Unknown compression, data that does not decompress, a CRC or a record length that does
         not match.
     """
-    _, _, size, crc, name_length = _CHUNK_HEAD.unpack_from(body)
-    at = _CHUNK_HEAD.size + name_length
-    compression = bytes(body[_CHUNK_HEAD.size : at]).decode()
+    _, _, size, crc = CHUNK_FIELDS.unpack_from(body)
+    (name_length,) = _U32.unpack_from(body, CHUNK_FIELDS.size)
+    at = CHUNK_FIELDS.size + _U32.size + name_length
+    compression = bytes(body[CHUNK_FIELDS.size + _U32.size : at]).decode()
     (length,) = _U64.unpack_from(body, at)
     start = at + _U64.size
     view = memoryview(body)[start : start + length]
@@ -342,16 +345,17 @@ def _chunk_records(body: bytes) -> list[_ChunkRecord]:
     pos = 0
     while pos < len(view):
         opcode, n = RECORD_HEADER.unpack_from(view, pos)
-        pos += RECORD_HEADER.size
-        record = view[pos : pos + n]
-        pos += n
-        if len(record) != n:
+        end = pos + RECORD_HEADER.size + n
+        if end > len(view) or (opcode == Opcode.MESSAGE and n < MESSAGE_FIELDS):
             raise ValueError("a record is cut short")
         if opcode == Opcode.MESSAGE:
-            channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(record)
-            data = bytes(record[_MESSAGE_HEAD.size :])
+            _, _, channel_id, sequence, log_time, publish_time = MESSAGE_HEADER.unpack_from(
+                view, pos
+            )
+            data = bytes(view[pos + MESSAGE_HEADER.size : end])
             out.append(Message(channel_id, log_time, data, publish_time, sequence))
         elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
             kind = Schema if opcode == Opcode.SCHEMA else Channel
-            out.append(kind.read(ReadDataStream(io.BytesIO(record))))
+            out.append(kind.read(ReadDataStream(io.BytesIO(view[pos + RECORD_HEADER.size : end]))))
+        pos = end
     return out

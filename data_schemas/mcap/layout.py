@@ -1,7 +1,8 @@
 """The byte layout of the MCAP records that bearing-slam reads and writes without the library.
 
 One definition for the writer (:mod:`data_schemas.mcap.chunks`), the in-place reader
-(:mod:`data_schemas.mcap.index`) and the checking scanner (:mod:`data_schemas.mcap.scan`).
+(:mod:`data_schemas.mcap.index`), the follower (:mod:`data_schemas.mcap.follow`) and the checking
+scanner (:mod:`data_schemas.mcap.scan`).
 All integers are little-endian (MCAP specification).
 """
 
