@@ -14,7 +14,7 @@ from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, McapRecord, Message
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import StreamReader
 
 from data_schemas.errors import CorruptLogError, LogError
 from data_schemas.mcap.info import log_summary
@@ -24,6 +24,7 @@ from data_schemas.mcap.writer import LogWriter
 from recorder.clock import VirtualClock
 from recorder.timebase import EpochClock
 from replay.cli import cli
+from tests.mcap_library import chunk_records
 from tests.recorder.samples import make_session_doc, sample_messages
 
 Msg = tuple[str, int, int, bytes]  # topic, sequence, log time, data
@@ -51,7 +52,7 @@ def finished(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFa
     path = tmp_path_factory.mktemp("logs") / "a.mcap"
     _log(path, frames, chunk_bytes)
     chunks = [r for r, _ in _library_records(path.read_bytes()) if isinstance(r, Chunk)]
-    sizes = [sum(isinstance(r, Message) for r in breakup_chunk(c)) for c in chunks]
+    sizes = [sum(isinstance(r, Message) for r in chunk_records(c)) for c in chunks]
     if chunk_bytes == 10**8:
         assert sizes == [2 * frames]
     elif chunk_bytes == 100:
@@ -78,9 +79,7 @@ def _read_until_damage(data: bytes) -> list[Msg]:
     stream = io.BytesIO(data)
     try:
         for record in StreamReader(stream, emit_chunks=True, validate_crcs=True).records:
-            inner = (
-                breakup_chunk(record, validate_crc=True) if isinstance(record, Chunk) else [record]
-            )
+            inner = chunk_records(record) if isinstance(record, Chunk) else [record]
             for rec in inner:
                 if isinstance(rec, Channel):
                     topics[rec.id] = rec.topic
@@ -107,7 +106,7 @@ def _spans(data: bytes) -> list[tuple[Msg, int, int]]:
             continue
         assert record.compression == ""
         base = end - len(record.data)
-        inner = iter(breakup_chunk(record, validate_crc=True))
+        inner = iter(chunk_records(record))
         pos = 0
         while pos < len(record.data):
             opcode, length = struct.unpack_from("<BQ", record.data, pos)
