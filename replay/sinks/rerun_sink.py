@@ -39,7 +39,7 @@ FL are drawn with y up while the logged values stay in their frame.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -87,24 +87,31 @@ def shorten(
     return np.vstack([out, out[:1]])
 
 
-def detection_segments(
-    calibration: Calibration, bearings_rad: Iterable[float]
-) -> list[NDArray[np.float64]]:
-    """Image segments (pixels, x right, y down) that mark each bearing on the frame (pinhole: a
-    polyline bent by the lens; empty for a bearing behind the camera)."""
-    segments = []
-    for b in bearings_rad:
-        if isinstance(calibration, PinholeCalibration):
-            line = bearing_polyline(calibration, b)
-            segments.append(np.zeros((0, 2)) if line is None else line)
-        elif isinstance(calibration, UnwrappedCalibration):
-            u = float(calibration.column_of_bearing(b))
-            segments.append(np.array([[u, 0.0], [u, float(calibration.height)]]))
-        else:
-            radii = np.array([0.0, calibration.r_max])
-            x, y = calibration.pixel_of_bearing(np.array([b, b]), radii)
-            segments.append(np.stack([x, y], axis=1))
-    return segments
+def class_labels(masks: Mapping[str, NDArray[np.bool_]], names: Sequence[str]) -> NDArray[np.uint8]:
+    """One (H, W) class image from each landmark's (H, W) mask: ``k + 1`` where ``names[k]``'s
+    mask is set (where masks overlap, the later name's), 0 elsewhere (at most 255 names)."""
+    labels = np.zeros(next(iter(masks.values())).shape, np.uint8)
+    for i, name in enumerate(names, start=1):
+        mask = masks.get(name)
+        if mask is not None:
+            np.maximum(labels, mask.view(np.uint8) * np.uint8(i), out=labels)
+    return labels
+
+
+def detection_strips(calibration: Calibration, bearings_rad: Sequence[float]) -> Strips:
+    """Image lines (pixels, x right, y down) that mark each bearing on the frame: a column of
+    the unwrapped panorama, a ray of the omni image, a polyline bent by the lens (pinhole; no
+    point for a bearing behind the camera)."""
+    if isinstance(calibration, PinholeCalibration):
+        lines = [bearing_polyline(calibration, b) for b in bearings_rad]
+        return Strips.of([np.zeros((0, 2)) if line is None else line for line in lines])
+    b = np.repeat(np.asarray(bearings_rad, np.float64), 2)  # each line's two ends
+    if isinstance(calibration, UnwrappedCalibration):
+        x = calibration.column_of_bearing(b)
+        y = np.tile([0.0, float(calibration.height)], len(bearings_rad))
+    else:
+        x, y = calibration.pixel_of_bearing(b, np.tile([0.0, calibration.r_max], len(bearings_rad)))
+    return Strips(np.stack([x, y], axis=1), np.full(len(bearings_rad), 2, np.int64))
 
 
 class RerunSink:
@@ -238,11 +245,7 @@ class RerunSink:
             )
             raw.send(self.rec)
         if frame.masks is not None:
-            labels = np.zeros(next(iter(frame.masks.values())).shape, np.uint8)
-            for i, name in enumerate(self._run.session.landmark_names(), start=1):
-                mask = frame.masks.get(name)
-                if mask is not None:
-                    labels[mask] = i
+            labels = class_labels(frame.masks, self._run.session.landmark_names())
             add("camera/panorama/masks", rr.SegmentationImage, buffer=[labels.ravel()])
         seen = {
             d.name: d.bearing_rad
@@ -254,7 +257,7 @@ class RerunSink:
             add(
                 "camera/panorama/detections",
                 rr.LineStrips2D,
-                strips=Strips.of(detection_segments(cal, seen.values())),
+                strips=detection_strips(cal, list(seen.values())),
                 colors=[self._rgb[n] for n in seen],
                 labels=[f"{n} {math.degrees(b):.1f}°" for n, b in seen.items()],
             )
@@ -265,7 +268,7 @@ class RerunSink:
                 add(
                     "camera/panorama/rejected",
                     rr.LineStrips2D,
-                    strips=Strips.of(detection_segments(cal, [b for b, _ in rejected])),
+                    strips=detection_strips(cal, [b for b, _ in rejected]),
                     labels=[f"rejected: {why}" for _, why in rejected],
                 )
         for name, b in seen.items():

@@ -15,9 +15,11 @@ import rerun as rr
 from click.testing import CliRunner
 from logfactory import HEIGHT, MOVES, write_log
 
+from data_schemas.calibration import OmniCalibration, PinholeCalibration, UnwrappedCalibration
 from replay.cli import cli
 from replay.process import process_log
 from replay.records import MethodConfig
+from replay.sinks.rerun_sink import class_labels, detection_strips
 from tests.mcap_reader import LogReader
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -348,3 +350,47 @@ def test_raw_frames_are_the_logged_pixels_at_their_log_times(tmp_path: Path) -> 
         np.testing.assert_array_equal(np.asarray(r["Image:buffer"][0], np.uint8), pixels)
         [fmt] = r["Image:format"]
         assert (fmt["width"], fmt["height"]) == (width, height)
+
+
+def test_class_labels_number_the_landmarks_in_order() -> None:
+    """Hand-made masks: each landmark's pixels get its number; an overlap goes to the later
+    name, a landmark without a mask leaves no pixel."""
+    a = np.zeros((3, 4), bool)
+    a[0, :2] = True
+    b = np.zeros((3, 4), bool)
+    b[0, 1:3] = b[2, 3] = True
+    labels = class_labels({"A": a, "B": b, "D": a}, ["A", "B", "C", "D"])
+    expected = np.zeros((3, 4), np.uint8)
+    expected[0, 1:3] = expected[2, 3] = 2  # B over A at (0, 1)
+    expected[0, :2] = 4  # D (A's mask again) over both
+    np.testing.assert_array_equal(labels, expected)
+    assert labels.dtype == np.uint8
+
+
+def test_detection_lines_look_along_their_bearings() -> None:
+    bearings = [-3.0, -0.4, 0.0, 1.2, 3.1]
+    unwrapped = UnwrappedCalibration(width=360, height=40, offset_rad=0.3, direction=-1)
+    strips = detection_strips(unwrapped, bearings)
+    np.testing.assert_array_equal(strips.lengths, [2] * 5)
+    ends = strips.points.reshape(5, 2, 2)
+    np.testing.assert_array_equal(ends[:, :, 1], [[0.0, 40.0]] * 5)  # top to bottom
+    np.testing.assert_array_equal(ends[:, 0, 0], ends[:, 1, 0])  # one column
+    # column u looks along offset + direction * 2 pi u / width
+    got = 0.3 - 2 * np.pi * ends[:, 0, 0] / 360
+    np.testing.assert_allclose(np.angle(np.exp(1j * (got - bearings))), 0.0, atol=1e-12)
+
+    omni = OmniCalibration(width=200, height=160, cx=90.0, cy=70.0, r_min=10.0, r_max=60.0)
+    ends = detection_strips(omni, bearings).points.reshape(5, 2, 2)
+    np.testing.assert_allclose(ends[:, 0], [[90.0, 70.0]] * 5)  # from the mirror's centre
+    dx, dy = ends[:, 1, 0] - 90.0, ends[:, 1, 1] - 70.0
+    np.testing.assert_allclose(np.hypot(dx, dy), 60.0)  # out to r_max
+    got = -np.pi / 2 + np.arctan2(-dy, dx)  # counter-clockwise on screen from offset -pi/2
+    np.testing.assert_allclose(np.angle(np.exp(1j * (got - bearings))), 0.0, atol=1e-12)
+
+    pinhole = PinholeCalibration(width=320, height=240, fx=300.0, fy=300.0, cx=160.0, cy=120.0)
+    strips = detection_strips(pinhole, [0.2, 3.0, -0.3])  # 3.0 rad is behind the camera
+    np.testing.assert_array_equal(strips.lengths, [9, 0, 9])
+    lines = np.split(strips.points, [9, 9])
+    for b, line in zip([0.2, -0.3], (lines[0], lines[2]), strict=True):
+        # no distortion: one column, x = cx - fx tan(b) (+ 0.5: pixel centres)
+        np.testing.assert_allclose(line[:, 0], 160.0 - 300.0 * np.tan(b) + 0.5, atol=1e-9)
