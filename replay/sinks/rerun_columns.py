@@ -4,7 +4,8 @@
 row); ``send_columns`` converts each component once for many rows. :class:`ColumnBuffer` keeps
 the rows of each (entity, archetype) in order and sends them in one call per timeline set: the
 recording holds the same rows, with the same values at the same times, as one ``log`` call per
-row would give (without Rerun's automatic ``log_tick``).
+row with Rerun's automatic ``log_time`` and ``log_tick`` turned off (the automatic ``log_time``
+would put the wall clock on the timeline of that name, which here is the log's own time).
 
 Line strips are converted here (one flat point array and the strip lengths) rather than by
 Rerun's converter, which builds an Arrow array per strip.
