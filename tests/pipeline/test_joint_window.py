@@ -1,0 +1,171 @@
+"""Old keyframes folded into a linear prior (pipeline/joint/window.py): the prior's information
+against a Schur complement computed by hand, and a bearing map solved with its old keyframes
+marginalized against the same map solved whole."""
+
+from __future__ import annotations
+
+import math
+
+import gtsam
+import numpy as np
+
+from pipeline.joint import graph as g
+from pipeline.joint.window import FrozenBearings, marginalize
+
+
+def _information(
+    factor: gtsam.NonlinearFactor, values: gtsam.Values, keys: list[int]
+) -> np.ndarray:
+    """The information matrix of ``factor`` linearized at ``values``, in the order of ``keys``."""
+    hessian = gtsam.HessianFactor(factor.linearize(values))
+    dims = [2] * len(keys)
+    out = np.zeros((sum(dims), sum(dims)))
+    info = hessian.information()
+    order = list(hessian.keys())
+    offsets = np.cumsum([0, *dims])
+    for i, ki in enumerate(keys):
+        for j, kj in enumerate(keys):
+            a, b = order.index(ki), order.index(kj)
+            out[offsets[i] : offsets[i + 1], offsets[j] : offsets[j + 1]] = info[
+                2 * a : 2 * a + 2, 2 * b : 2 * b + 2
+            ]
+    return out
+
+
+def _no_covariance(keys: list[int]) -> np.ndarray:
+    raise AssertionError("not asked for")
+
+
+def test_marginal_prior_is_the_schur_complement_of_a_linear_chain() -> None:
+    # points a - b - c on a line of relative measurements; a has a prior; b is marginalized
+    a, b, c = (int(gtsam.symbol("p", i)) for i in range(3))
+    s_prior, s_ab, s_bc, s_ac = 0.5, 0.2, 0.3, 0.7
+    iso = gtsam.noiseModel.Isotropic.Sigma
+    factors = [
+        gtsam.PriorFactorPoint2(a, np.zeros(2), iso(2, s_prior)),
+        gtsam.BetweenFactorPoint2(a, b, np.array([1.0, 0.0]), iso(2, s_ab)),
+        gtsam.BetweenFactorPoint2(b, c, np.array([1.0, 0.0]), iso(2, s_bc)),
+        gtsam.BetweenFactorPoint2(a, c, np.array([2.0, 0.0]), iso(2, s_ac)),
+    ]
+    values = gtsam.Values()
+    for k, x in ((a, 0.1), (b, 1.2), (c, 1.9)):
+        values.insert(k, np.array([x, -0.1]))
+    done = marginalize(factors, values, [b], lambda keys: np.eye(2 * len(keys)))
+    prior = done.prior
+    assert prior is not None
+    assert sorted(prior.keys()) == sorted([a, c])
+    # by hand, per axis (the axes are independent and alike): information of (a, b, c)
+    w_p, w_ab, w_bc, w_ac = (1 / s**2 for s in (s_prior, s_ab, s_bc, s_ac))
+    lam = np.array(
+        [
+            [w_p + w_ab + w_ac, -w_ab, -w_ac],
+            [-w_ab, w_ab + w_bc, -w_bc],
+            [-w_ac, -w_bc, w_bc + w_ac],
+        ]
+    )
+    keep = [0, 2]
+    schur = lam[np.ix_(keep, keep)] - np.outer(lam[keep, 1], lam[1, keep]) / lam[1, 1]
+    expected = np.kron(schur, np.eye(2))
+    got = _information(prior, values, [a, c])
+    np.testing.assert_allclose(got, expected, rtol=1e-9)
+    # b's covariance: its conditional given a and c plus theirs (identity here) carried over
+    gain = np.array([w_ab, w_bc]) / lam[1, 1]
+    np.testing.assert_allclose(
+        done.covariances[b], (1 / lam[1, 1] + gain @ gain) * np.eye(2), rtol=1e-9
+    )
+
+
+def _bearing_map() -> tuple[list[gtsam.NonlinearFactor], gtsam.Values, list[int], list[int]]:
+    """Six keyframes along a line seeing four landmarks (exact bearings, a gauge on two
+    landmarks, odometry between keyframes); the keyframe and landmark keys."""
+    rng = np.random.default_rng(4)
+    lm = np.array([[0.0, 0.0], [1.0, 0.0], [0.3, 0.8], [0.9, 0.7]])
+    poses = [gtsam.Pose2(-0.5 + 0.35 * i, -0.6 + 0.05 * i, 0.1 * i) for i in range(6)]
+    lkeys = [g.landmark_key(j) for j in range(len(lm))]
+    pkeys = [g.pose_key(i, 0) for i in range(len(poses))]
+    noise = gtsam.noiseModel.Isotropic.Sigma(1, math.radians(0.5))
+    odo = gtsam.noiseModel.Diagonal.Sigmas(np.array([0.05, 0.05, 0.02]))
+    factors: list[gtsam.NonlinearFactor] = list(g.gauge_factors(lkeys[0], lkeys[1]))
+    for pk, pose in zip(pkeys, poses, strict=True):
+        for lk, p in zip(lkeys, lm, strict=True):
+            factors.append(g.bearing_factor(pk, lk, float(pose.bearing(p).theta()), noise))
+    for i in range(len(poses) - 1):
+        factors.append(
+            gtsam.BetweenFactorPose2(pkeys[i], pkeys[i + 1], poses[i].between(poses[i + 1]), odo)
+        )
+    values = gtsam.Values()
+    for lk, p in zip(lkeys, lm, strict=True):
+        values.insert(lk, p + rng.normal(0.0, 0.05, 2))
+    for pk, pose in zip(pkeys, poses, strict=True):
+        values.insert(pk, pose.compose(gtsam.Pose2(*rng.normal(0.0, 0.03, 3))))
+    return factors, values, pkeys, lkeys
+
+
+def _solve(factors: list[gtsam.NonlinearFactor], values: gtsam.Values) -> gtsam.Values:
+    graph = gtsam.NonlinearFactorGraph()
+    for f in factors:
+        graph.add(f)
+    return g.solve_batch(graph, values)
+
+
+def test_a_map_with_old_keyframes_marginalized_keeps_the_optimum_and_covariance() -> None:
+    factors, values, pkeys, lkeys = _bearing_map()
+    whole = _solve(factors, values)
+    old = pkeys[:3]
+    touching = [f for f in factors if set(f.keys()) & set(old)]
+    rest = [f for f in factors if not set(f.keys()) & set(old)]
+    graph_whole = gtsam.NonlinearFactorGraph()
+    for f in factors:
+        graph_whole.add(f)
+    m_whole = gtsam.Marginals(graph_whole, whole)
+
+    def joint(keys: list[int]) -> np.ndarray:
+        return np.asarray(m_whole.jointMarginalCovariance(keys).fullMatrix())
+
+    done = marginalize(touching, whole, old, joint)
+    prior = done.prior
+    assert prior is not None
+    # each old keyframe keeps the covariance it has in the whole map
+    assert sorted(done.covariances) == sorted(old)
+    for k in old:
+        np.testing.assert_allclose(done.covariances[k], m_whole.marginalCovariance(k), rtol=1e-6)
+    assert set(prior.keys()) == {*lkeys, pkeys[3]}  # the landmarks and the first keyframe kept
+    kept = whole.extract([*lkeys, *pkeys[3:]])
+    # moved away from the optimum, the reduced map comes back to it
+    start = gtsam.Values(kept)
+    for lk in lkeys[2:]:
+        start.update(lk, kept.atPoint2(lk) + np.array([0.03, -0.02]))
+    reduced = _solve([*rest, prior], start)
+    for lk in lkeys:
+        np.testing.assert_allclose(reduced.atPoint2(lk), whole.atPoint2(lk), atol=1e-6)
+    # and has the whole map's marginal covariance of each landmark
+    graph_reduced = gtsam.NonlinearFactorGraph()
+    for f in [*rest, prior]:
+        graph_reduced.add(f)
+    m_reduced = gtsam.Marginals(graph_reduced, kept)
+    for lk in lkeys[2:]:
+        np.testing.assert_allclose(
+            m_reduced.marginalCovariance(lk), m_whole.marginalCovariance(lk), rtol=1e-6
+        )
+
+
+def test_no_prior_when_nothing_remains() -> None:
+    k = g.pose_key(0, 0)
+    prior = gtsam.PriorFactorPose2(k, gtsam.Pose2(), gtsam.noiseModel.Isotropic.Sigma(3, 1.0))
+    values = gtsam.Values()
+    values.insert(k, gtsam.Pose2())
+    done = marginalize([prior], values, [k], _no_covariance)
+    assert done.prior is None
+    np.testing.assert_allclose(done.covariances[k], np.eye(3), rtol=1e-9)
+
+
+def test_frozen_bearings_add_and_drop_a_landmark() -> None:
+    fb = FrozenBearings.empty().plus(
+        np.array([2, 3, 2]), np.array([0.1, -0.2, 0.3]), np.array([False, True, False])
+    )
+    fb = fb.plus(np.array([3]), np.array([0.4]), np.array([False]))
+    assert len(fb) == 4
+    less = fb.without(2)
+    assert less.landmark.tolist() == [3, 3]
+    assert less.residual_rad.tolist() == [-0.2, 0.4]
+    assert less.rejected.tolist() == [True, False]
