@@ -12,6 +12,7 @@ the residual they had then (:class:`FrozenBearings`).
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
@@ -55,9 +56,10 @@ def marginalize(
     old_keys : sequence of int
         The variables to marginalize out.
     joint_covariance : callable, optional
-        Without it no covariance is computed. The whole map's joint marginal covariance of the given keys (blocks in their order): the
-        old variables' covariances are their conditional covariance given their neighbours
-        (from ``factors``: no other factor involves them) plus the neighbours' own, propagated.
+        The whole map's joint marginal covariance of the given keys (blocks in their order);
+        without it no covariance is computed. The old variables' covariances are their
+        conditional covariance given their neighbours (from ``factors``: no other factor
+        involves them) plus the neighbours' own, propagated.
     """
     graph = gtsam.NonlinearFactorGraph()
     for factor in factors:
@@ -74,20 +76,60 @@ def marginalize(
     dims = values.dims()
     hessian, _ = linear.hessian(gtsam.Ordering([*old, *others]))
     n_old = sum(dims[k] for k in old)
-    covariances: dict[int, NDArray[np.float64]] = {}
-    try:
-        conditional = np.linalg.inv(hessian[:n_old, :n_old])
-    except np.linalg.LinAlgError:
-        return Marginalized(_container(rest, values), covariances)
-    gain = conditional @ hessian[:n_old, n_old:]
     neighbours = joint_covariance(others) if others else np.zeros((0, 0))
-    start = 0
-    for k in old:
-        block = slice(start, start + dims[k])
-        cov = conditional[block, block] + gain[block] @ neighbours @ gain[block].T
-        covariances[k] = 0.5 * (cov + cov.T)
-        start += dims[k]
-    return Marginalized(_container(rest, values), covariances)
+    try:
+        covs = _old_covariances(
+            hessian[:n_old, :n_old], hessian[:n_old, n_old:], [dims[k] for k in old], neighbours
+        )
+    except np.linalg.LinAlgError:  # the old variables are not determined by their neighbours
+        return Marginalized(_container(rest, values), {})
+    return Marginalized(_container(rest, values), dict(zip(old, covs, strict=True)))
+
+
+def _old_covariances(
+    h_oo: NDArray[np.float64],
+    h_os: NDArray[np.float64],
+    sizes: list[int],
+    neighbours: NDArray[np.float64],
+) -> list[NDArray[np.float64]]:
+    """The diagonal blocks of ``X + B S B^T``, ``X = h_oo^-1``, ``B = X h_os``, ``S`` the
+    neighbours' covariance: each old variable's covariance. When ``h_oo`` is block tridiagonal
+    (a chain of keyframes, in order) its blocks come from one pass down the chain and one back
+    (no dense inverse: its cost grows with the chain, not its cube); otherwise densely."""
+    cuts = np.cumsum([0, *sizes])
+    blocks = [slice(int(a), int(b)) for a, b in itertools.pairwise(cuts)]
+    n = len(blocks)
+    if any(np.any(h_oo[blocks[i], int(cuts[i + 2]) :]) for i in range(n - 2)):
+        x = np.linalg.inv(h_oo)
+        gain = x @ h_os
+        return [_symmetric(x[b, b] + gain[b] @ neighbours @ gain[b].T) for b in blocks]
+    s_inv: list[NDArray[np.float64]] = []
+    rhs: list[NDArray[np.float64]] = []
+    for i, b in enumerate(blocks):
+        d, f = h_oo[b, b], h_os[b]
+        if i:
+            e = h_oo[blocks[i - 1], b]
+            k = e.T @ s_inv[-1]
+            d, f = d - k @ e, f - k @ rhs[-1]
+        s_inv.append(np.asarray(np.linalg.inv(d), np.float64))
+        rhs.append(f)
+    out: list[NDArray[np.float64]] = []
+    x_next = gain_next = np.zeros((0, 0))
+    for i in reversed(range(n)):
+        si = s_inv[i]
+        if i == n - 1:
+            x, gain = si, si @ rhs[i]
+        else:
+            e = h_oo[blocks[i], blocks[i + 1]]
+            k = si @ e
+            x, gain = si + k @ x_next @ k.T, si @ (rhs[i] - e @ gain_next)
+        out.append(_symmetric(x + gain @ neighbours @ gain.T))
+        x_next, gain_next = x, gain
+    return out[::-1]
+
+
+def _symmetric(m: NDArray[np.float64]) -> NDArray[np.float64]:
+    return 0.5 * (m + m.T)
 
 
 def _container(

@@ -8,6 +8,7 @@ import math
 
 import gtsam
 import numpy as np
+import pytest
 
 from pipeline.joint import graph as g
 from pipeline.joint.window import FrozenBearings, marginalize
@@ -75,9 +76,12 @@ def test_marginal_prior_is_the_schur_complement_of_a_linear_chain() -> None:
     )
 
 
-def _bearing_map() -> tuple[list[gtsam.NonlinearFactor], gtsam.Values, list[int], list[int]]:
+def _bearing_map(
+    loop: bool = False,
+) -> tuple[list[gtsam.NonlinearFactor], gtsam.Values, list[int], list[int]]:
     """Six keyframes along a line seeing four landmarks (exact bearings, a gauge on two
-    landmarks, odometry between keyframes); the keyframe and landmark keys."""
+    landmarks, odometry between consecutive keyframes and with ``loop`` between the first and
+    the third too); the keyframe and landmark keys."""
     rng = np.random.default_rng(4)
     lm = np.array([[0.0, 0.0], [1.0, 0.0], [0.3, 0.8], [0.9, 0.7]])
     poses = [gtsam.Pose2(-0.5 + 0.35 * i, -0.6 + 0.05 * i, 0.1 * i) for i in range(6)]
@@ -89,9 +93,9 @@ def _bearing_map() -> tuple[list[gtsam.NonlinearFactor], gtsam.Values, list[int]
     for pk, pose in zip(pkeys, poses, strict=True):
         for lk, p in zip(lkeys, lm, strict=True):
             factors.append(g.bearing_factor(pk, lk, float(pose.bearing(p).theta()), noise))
-    for i in range(len(poses) - 1):
+    for i, j in [(i, i + 1) for i in range(len(poses) - 1)] + ([(0, 2)] if loop else []):
         factors.append(
-            gtsam.BetweenFactorPose2(pkeys[i], pkeys[i + 1], poses[i].between(poses[i + 1]), odo)
+            gtsam.BetweenFactorPose2(pkeys[i], pkeys[j], poses[i].between(poses[j]), odo)
         )
     values = gtsam.Values()
     for lk, p in zip(lkeys, lm, strict=True):
@@ -108,8 +112,9 @@ def _solve(factors: list[gtsam.NonlinearFactor], values: gtsam.Values) -> gtsam.
     return g.solve_batch(graph, values)
 
 
-def test_a_map_with_old_keyframes_marginalized_keeps_the_optimum_and_covariance() -> None:
-    factors, values, pkeys, lkeys = _bearing_map()
+@pytest.mark.parametrize("loop", [False, True])
+def test_a_map_with_old_keyframes_marginalized_keeps_the_optimum_and_covariance(loop: bool) -> None:
+    factors, values, pkeys, lkeys = _bearing_map(loop)
     whole = _solve(factors, values)
     old = pkeys[:3]
     touching = [f for f in factors if set(f.keys()) & set(old)]
