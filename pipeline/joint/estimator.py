@@ -47,6 +47,13 @@ from pipeline.joint.noise import NoiseEstimate, robust_std
 from pipeline.joint.result import JointMovementResult
 from pipeline.joint.state import JointSettings, MapState, Movement
 from pipeline.joint.table import by_landmark
+from pipeline.joint.window import (
+    DEFAULT_WINDOW,
+    MIN_WINDOW,
+    due,
+    marginalize,
+    marginalize_oldest,
+)
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation, MovementStatus, Placement, skipped
 
@@ -70,6 +77,10 @@ class JointSlam:
     divergence_rms_rad : float or None
         The map counts as diverged when the robust RMS of its residuals exceeds this (default
         eps), or when a landmark jumps (:func:`pipeline.joint.robustness.jumped`).
+    window : int or None
+        Movements kept in the graph (at least :data:`pipeline.joint.window.MIN_WINDOW`);
+        older ones are marginalized into a prior on the rest (:mod:`pipeline.joint.window`),
+        so that the cost per movement does not grow with the log. None keeps every movement.
     """
 
     def __init__(
@@ -86,6 +97,7 @@ class JointSlam:
         turn_prior_sigma_rad: float | None = None,
         distance_prior_rel: float | None = None,
         divergence_rms_rad: float | None = None,
+        window: int | None = DEFAULT_WINDOW,
     ) -> None:
         self.paper = BearingSlam(
             landmarks,
@@ -100,6 +112,9 @@ class JointSlam:
             raise EstimationError(f"turn prior std must be > 0, got {turn_prior_sigma_rad}")
         if distance_prior_rel is not None and not distance_prior_rel > 0.0:
             raise EstimationError(f"distance prior std must be > 0, got {distance_prior_rel}")
+        if window is not None and window < MIN_WINDOW:
+            raise EstimationError(f"window must be at least {MIN_WINDOW} movements, got {window}")
+        self.window = window
         self.landmarks = list(self.paper.landmarks)
         self.reference = reference
         self.eps_rad = float(vision_error_rad)
@@ -156,16 +171,20 @@ class JointSlam:
             return {}
         sigma = max(self._state.noise.sigma_rad, 1e-12)
         skip = self.settings.reference_indices()
-        table = self._map.table
-        return {
-            self.landmarks[j]: (v.size, robust_std(v) / sigma)
-            for j, v in by_landmark(table, self._map.residuals(), skip).items()
-        }
+        live = by_landmark(self._map.table, self._map.residuals(), skip)
+        frozen = self._state.frozen_bearings
+        out = {}
+        for j in sorted({*live, *np.unique(frozen.landmark).tolist()} - set(skip)):
+            v = np.concatenate(
+                [live.get(j, np.zeros(0)), frozen.residual_rad[frozen.landmark == j]]
+            )
+            out[self.landmarks[j]] = (v.size, robust_std(v) / sigma)
+        return out
 
     @property
     def used_movements(self) -> list[int]:
-        """Indices of the movements in the graph, in order."""
-        return sorted(self._state.placed)
+        """Indices of the movements placed in the map (in the graph or marginalized), in order."""
+        return sorted([*self._state.placed, *self._state.frozen])
 
     @property
     def waiting_movements(self) -> list[int]:
@@ -174,9 +193,15 @@ class JointSlam:
 
     @property
     def trajectory_fl(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Per movement in the graph (index order), O1 and O2 as (1, 2) arrays in FL."""
+        """Per movement placed in the map (index order), O1 and O2 as (1, 2) arrays in FL (a
+        marginalized movement: where it was when it left the graph)."""
         out = []
-        for k in sorted(self._state.placed):
+        for k in self.used_movements:
+            frozen = self._state.frozen.get(k)
+            if frozen is not None:
+                (x1, y1, _), (x2, y2, _) = frozen.poses
+                out.append((np.array([[x1, y1]]), np.array([[x2, y2]])))
+                continue
             mp = self._map.movement_pose(k)
             out.append((mp.o1_fl[None, :], mp.o2_fl[None, :]))
         return out
@@ -186,8 +211,18 @@ class JointSlam:
         now: position and heading (FL) and the covariance of its tangent ``(x, y, heading)``
         in the keyframe's own frame (FL, rad), scaled by the estimated noise as the landmarks'
         covariances are. A keyframe whose marginal iSAM2 cannot give (an indeterminate
-        system) is left out."""
-        return self._map.keyframe_poses(sorted(self._state.placed), self._state.covariance_scale())
+        system) is left out. A marginalized movement's keyframes are as they were when it left
+        the graph (pose and covariance then, scaled by the noise estimated now)."""
+        scale = self._state.covariance_scale()
+        out = {}
+        for k, frozen in sorted(self._state.frozen.items()):
+            for end, ((x, y, heading), cov) in enumerate(
+                zip(frozen.poses, frozen.covs, strict=True)
+            ):
+                if cov is not None:
+                    out[k, end] = KeyframePose(np.array([x, y]), heading, cov * scale)
+        out.update(self._map.keyframe_poses(sorted(self._state.placed), scale))
+        return out
 
     def _belief(self, name: str) -> LandmarkEstimate | None:
         """The initializer's (the paper's filter's) belief about a landmark, if it has one."""
@@ -203,12 +238,21 @@ class JointSlam:
             m.bearings[:] = [b for b in m.bearings if b.landmark != name]
         self._state.pending.pop(name, None)
         self._state.rejected = {b for b in self._state.rejected if b.landmark != name}
+        for frozen in self._state.frozen.values():  # shared with the snapshot: a new list
+            frozen.movement.bearings[:] = [
+                b for b in frozen.movement.bearings if b.landmark != name
+            ]
+        self._state.frozen_bearings = self._state.frozen_bearings.without(self._lm_index[name])
         self.paper.forget(name)
         self._state.estimates.pop(name, None)
         if name in self._state.in_graph:
             self._state.in_graph.discard(name)
             self._map.retable(self._state)
             values = gtsam.Values(self._map.values)
+            if self._state.prior is not None:  # its bearings' part of the prior stays in it
+                self._state.prior = marginalize(
+                    [self._state.prior], values, [self._map.key(name)]
+                ).prior
             values.erase(self._map.key(name))
             self._map.rebuild(self._state, values)
             self._map.update_estimates(self._state)
@@ -295,6 +339,8 @@ class JointSlam:
         if self._map.careful and len(self._state.placed) >= CAREFUL_MOVEMENTS:
             # the map is determined: plain steps from now on
             self._map.rebuild(self._state, self._map.values)
+        if due(self._state, self.window):
+            marginalize_oldest(self._state, self._map, self.window or 0)
         snap = robustness.snapshot(self._state, self._map)  # the map before the movement
         self._state.waiting[obs.index] = m
         before = self.estimates

@@ -196,6 +196,14 @@ class MapGraph:
         self._residual_memo = (self.values, self.table.version, r)  # holds the values
         return r
 
+    def all_residuals(self, state: MapState) -> NDArray[np.float64]:
+        """The residuals of the graph's bearings (:meth:`residuals`), then those of the frozen
+        movements' bearings as they were when their movements left the graph."""
+        frozen = state.frozen_bearings
+        if not len(frozen):
+            return self.residuals()
+        return np.concatenate([self.residuals(), frozen.residual_rad])
+
     def bearing_noise(self, state: MapState) -> gtsam.noiseModel.Base:
         """The bearing factors' noise model (the model's std, Huber loss if robust)."""
         return g.bearing_noise(state.sigma_model_rad, self.settings.robust)
@@ -388,18 +396,22 @@ class MapGraph:
                 graph.add(self._distance_factor(k, distance))
         for link in sorted(state.links):
             graph.add(self._link_factor(state, link))
+        if state.prior is not None:
+            graph.add(state.prior)
         noise = self.bearing_noise(state)
         self.factor_of.clear()
         for b in state.bearings(rejected=False):
             self.add_bearing(graph, b, noise)
         return graph
 
-    def rebuild(self, state: MapState, values: gtsam.Values) -> None:
-        """A fresh iSAM2 over every factor, from ``values`` refined by Levenberg-Marquardt."""
+    def rebuild(self, state: MapState, values: gtsam.Values, solve: bool = True) -> None:
+        """A fresh iSAM2 over every factor, from ``values`` refined by Levenberg-Marquardt
+        (unless not ``solve``)."""
         graph = self.full_graph(state, values)
         # an indeterminate system keeps the initial values; iSAM2 below still solves from them
-        with contextlib.suppress(RuntimeError):
-            values = g.solve_batch(graph, values)
+        if solve:
+            with contextlib.suppress(RuntimeError):
+                values = g.solve_batch(graph, values)
         self.isam = self.new_isam(len(state.placed))
         self.update(graph, values)
 
@@ -465,14 +477,14 @@ class MapGraph:
         rebuilt, when it is off by more than :data:`RETUNE_RATIO`) and every non-reference
         landmark's estimate: iSAM2's marginal scaled by the estimated noise."""
         s = self.settings
-        r = self.residuals()
+        r = self.all_residuals(state)
         state.noise = estimate_noise(r, state.n_params(), s.sigma0_rad, s.eps_rad)
         n = state.noise
         off = abs(math.log(n.sigma_rad / state.sigma_model_rad))
         if n.dof >= RETUNE_DOF and off > math.log(RETUNE_RATIO):
             state.sigma_model_rad = n.sigma_rad
             self.rebuild(state, self.values)
-            r = self.residuals()
+            r = self.all_residuals(state)
             state.noise = estimate_noise(r, state.n_params(), s.sigma0_rad, s.eps_rad)
         scale = state.covariance_scale()
         out = {}

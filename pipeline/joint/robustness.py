@@ -111,8 +111,11 @@ def misfit(state: MapState, graph: MapGraph, rms_limit_rad: float) -> str:
     """Why the residuals are out of bounds: too many beyond :data:`REJECT_EPS` eps, or a
     robust RMS over ``rms_limit_rad`` (empty if they are not)."""
     settings = graph.settings
-    r = graph.residuals()
-    far = int((~graph.table.rejected & (np.abs(r) > REJECT_EPS * settings.eps_rad)).sum())
+    bound = REJECT_EPS * settings.eps_rad
+    frozen = state.frozen_bearings
+    far = int((~graph.table.rejected & (np.abs(graph.residuals()) > bound)).sum())
+    far += int((~frozen.rejected & (np.abs(frozen.residual_rad) > bound)).sum())
+    r = graph.all_residuals(state)
     if far > max(1, MAX_REJECT_FRACTION * r.size):
         return f"{far} of {r.size} bearings more than {REJECT_EPS:g} eps from the map"
     noise = estimate_noise(r, state.n_params(), settings.sigma0_rad)

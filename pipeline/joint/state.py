@@ -13,6 +13,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
 from pipeline.estimate import LandmarkEstimate
 from pipeline.joint import graph as g
 from pipeline.joint.noise import NoiseEstimate
@@ -86,6 +90,63 @@ class Movement:
         return MovementObservation(self.index, ends[0], ends[1], self.turn_rad, self.distance_m)
 
 
+@dataclass(frozen=True)
+class FrozenMovement:
+    """A movement marginalized out of the graph (:mod:`pipeline.joint.window`), as it was then.
+
+    Attributes
+    ----------
+    movement : Movement
+        Its bearings, turn and distance.
+    poses : ((x, y, heading), (x, y, heading))
+        Its keyframes O1 and O2 (FL, rad).
+    covs : ((3, 3) array or None, (3, 3) array or None)
+        Their tangent covariances in the whole map then (at the noise model; None: not
+        determined).
+    """
+
+    movement: Movement
+    poses: tuple[tuple[float, float, float], tuple[float, float, float]]
+    covs: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]
+
+
+@dataclass(frozen=True)
+class FrozenBearings:
+    """Bearings of keyframes no longer in the graph, with the residual each had when its
+    keyframe left: landmark catalog index, residual (rad) and whether it was rejected, (n,)
+    each. Never changed in place (a change makes a new object)."""
+
+    landmark: NDArray[np.int64]
+    residual_rad: NDArray[np.float64]
+    rejected: NDArray[np.bool_]
+
+    @staticmethod
+    def empty() -> FrozenBearings:
+        """No bearings."""
+        return FrozenBearings(np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.bool_))
+
+    def plus(
+        self,
+        landmark: NDArray[np.int64],
+        residual_rad: NDArray[np.float64],
+        rejected: NDArray[np.bool_],
+    ) -> FrozenBearings:
+        """These bearings and more."""
+        return FrozenBearings(
+            np.concatenate([self.landmark, landmark]),
+            np.concatenate([self.residual_rad, residual_rad]),
+            np.concatenate([self.rejected, rejected]),
+        )
+
+    def without(self, landmark: int) -> FrozenBearings:
+        """These bearings less those of one landmark."""
+        keep = self.landmark != landmark
+        return FrozenBearings(self.landmark[keep], self.residual_rad[keep], self.rejected[keep])
+
+    def __len__(self) -> int:
+        return int(self.landmark.size)
+
+
 @dataclass
 class MapState:
     """What a rollback restores: the movements (placed in the graph, or waiting), the links
@@ -110,6 +171,15 @@ class MapState:
         The bearing noise estimated from the residuals (None before a map).
     sigma_model_rad : float
         The bearing std the bearing factors are weighted with.
+    frozen : dict of int to FrozenMovement
+        Movements marginalized out of the graph (replaced, never changed in place).
+    frozen_links : int
+        Links that joined a frozen movement.
+    prior : gtsam.NonlinearFactor or None
+        What the frozen movements' factors say about the variables still in the graph (one
+        linear factor; :mod:`pipeline.joint.window`).
+    frozen_bearings : FrozenBearings
+        The frozen movements' bearings of landmarks in the graph, with their residuals then.
     """
 
     placed: dict[int, Movement]
@@ -121,6 +191,10 @@ class MapState:
     estimates: dict[str, LandmarkEstimate]
     noise: NoiseEstimate | None
     sigma_model_rad: float
+    frozen: dict[int, FrozenMovement] = field(default_factory=dict)
+    frozen_links: int = 0
+    prior: gtsam.NonlinearFactor | None = None
+    frozen_bearings: FrozenBearings = field(default_factory=FrozenBearings.empty)
 
     @classmethod
     def empty(cls, settings: JointSettings) -> MapState:
@@ -149,13 +223,21 @@ class MapState:
             dict(self.estimates),
             self.noise,
             self.sigma_model_rad,
+            self.frozen,  # the frozen part is replaced, never changed in place
+            self.frozen_links,
+            self.prior,
+            self.frozen_bearings,
         )
 
     def n_params(self) -> int:
         """Free parameters of the keyframes and landmarks. The bearings still determine them
         with a distance prior, whose std is loose against the lengths the bearings give: not
         counting its share keeps the noise estimate on the safe side."""
-        return 2 * (len(self.in_graph) - 2) + 4 * len(self.placed) - 2 * len(self.links)
+        return (
+            2 * (len(self.in_graph) - 2)
+            + 4 * (len(self.placed) + len(self.frozen))
+            - 2 * (len(self.links) + self.frozen_links)
+        )
 
     def covariance_scale(self) -> float:
         """Factor from iSAM2's covariances (weighted with the model's std) to those of the

@@ -1,13 +1,15 @@
 """Old keyframes folded into one linear prior, so that the joint map's graph stops growing.
 
-Marginalizing variables out of a factor graph at the current estimate: the factors that touch
-them (with the prior of earlier marginalizations) are linearized there, the variables are
-eliminated, and what remains on their neighbours (the landmarks, the map's scale, the first
-keyframe kept) becomes one Gaussian factor, kept as a GTSAM ``LinearContainerFactor`` at its
-linearization point. Its information no longer changes with the estimate: the old keyframes'
-bearings are not relinearized, re-weighted by a new noise estimate or re-judged as outliers.
-The keyframes that leave the graph keep the pose and covariance they had then, their bearings
-the residual they had then (:class:`FrozenBearings`).
+Once the map holds :data:`WINDOW_STRIDE` movements more than its window, the oldest leave the
+graph (:func:`marginalize_oldest`): the factors that touch their keyframes (with the prior of
+earlier marginalizations) are linearized at the current estimate, the keyframes are eliminated,
+and what remains on their neighbours (the landmarks, the map's scale, the first keyframe kept)
+becomes one Gaussian factor, kept as a GTSAM ``LinearContainerFactor`` at its linearization
+point (:func:`marginalize`). That information no longer changes with the estimate: the old
+keyframes' bearings are not relinearized, re-weighted by a new noise estimate or re-judged as
+outliers. The movements that leave keep the poses and covariances their keyframes had then
+(:class:`pipeline.joint.state.FrozenMovement`), their bearings the residuals they had then
+(:class:`pipeline.joint.state.FrozenBearings`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,18 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 from numpy.typing import NDArray
+
+from pipeline.joint import graph as g
+from pipeline.joint.mapgraph import CAREFUL_MOVEMENTS, MapGraph
+from pipeline.joint.state import FrozenMovement, MapState
+
+#: Movements the joint map keeps in its graph by default (older ones are marginalized).
+DEFAULT_WINDOW = 100
+#: The graph holds up to this many movements more than its window before the oldest leave (one
+#: rebuild of the graph per this many movements).
+WINDOW_STRIDE = 50
+#: The smallest window: the map is rebuilt into its fast mode at CAREFUL_MOVEMENTS movements.
+MIN_WINDOW = CAREFUL_MOVEMENTS
 
 
 @dataclass(frozen=True)
@@ -147,38 +161,63 @@ def _container(
     return gtsam.LinearContainerFactor(gtsam.HessianFactor(kept), values.extract(keys))
 
 
-@dataclass(frozen=True)
-class FrozenBearings:
-    """Bearings of keyframes no longer in the graph, with the residual each had when its
-    keyframe left: landmark catalog index, residual (rad) and whether it was rejected, (n,) each.
-    """
+def due(state: MapState, window: int | None) -> bool:
+    """Whether the map holds enough movements beyond ``window`` (None: no window) for the
+    oldest to leave the graph."""
+    return window is not None and len(state.placed) >= window + WINDOW_STRIDE
 
-    landmark: NDArray[np.int64]
-    residual_rad: NDArray[np.float64]
-    rejected: NDArray[np.bool_]
 
-    @staticmethod
-    def empty() -> FrozenBearings:
-        """No bearings."""
-        return FrozenBearings(np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.bool_))
+def marginalize_oldest(state: MapState, graph: MapGraph, window: int) -> None:
+    """The placed movements older than the newest ``window`` leave the graph: their factors
+    folded into the state's prior, their keyframes' poses and covariances and their bearings'
+    residuals kept as numbers in ``state``; iSAM2 is rebuilt over the rest (no new solve: the
+    values are the map's estimate)."""
+    placed = sorted(state.placed)
+    old = placed[: len(placed) - window]
+    if not old:
+        return
+    old_set = set(old)
+    values = graph.values
+    old_keys = [g.pose_key(k, end) for k in old for end in (0, 1)]
+    old_key_set = set(old_keys)
+    factors = graph.isam.getFactorsUnsafe()
+    touching = []
+    for i in range(factors.size()):
+        f = factors.at(i)
+        if f is not None and (
+            isinstance(f, gtsam.LinearContainerFactor) or not old_key_set.isdisjoint(f.keys())
+        ):
+            touching.append(f)
+    isam = graph.isam
 
-    def plus(
-        self,
-        landmark: NDArray[np.int64],
-        residual_rad: NDArray[np.float64],
-        rejected: NDArray[np.bool_],
-    ) -> FrozenBearings:
-        """These bearings and more (a new object)."""
-        return FrozenBearings(
-            np.concatenate([self.landmark, landmark]),
-            np.concatenate([self.residual_rad, residual_rad]),
-            np.concatenate([self.rejected, rejected]),
+    def joint(keys: list[int]) -> NDArray[np.float64]:
+        return np.asarray(isam.jointMarginalCovariance(keys).fullMatrix(), np.float64)
+
+    done = marginalize(touching, values, old_keys, joint)
+    rows = np.isin(graph.table.slot // 2, old)
+    residuals = graph.residuals()
+    frozen = dict(state.frozen)
+    for k in old:
+        p1, p2 = (values.atPose2(g.pose_key(k, end)) for end in (0, 1))
+        frozen[k] = FrozenMovement(
+            state.placed.pop(k),
+            ((p1.x(), p1.y(), p1.theta()), (p2.x(), p2.y(), p2.theta())),
+            (done.covariances.get(g.pose_key(k, 0)), done.covariances.get(g.pose_key(k, 1))),
         )
-
-    def without(self, landmark: int) -> FrozenBearings:
-        """These bearings less those of one landmark (a new object)."""
-        keep = self.landmark != landmark
-        return FrozenBearings(self.landmark[keep], self.residual_rad[keep], self.rejected[keep])
-
-    def __len__(self) -> int:
-        return int(self.landmark.size)
+    state.frozen = frozen
+    state.prior = done.prior
+    state.frozen_bearings = state.frozen_bearings.plus(
+        graph.table.landmark[rows].copy(), residuals[rows].copy(), graph.table.rejected[rows].copy()
+    )
+    gone = {link for link in state.links if old_set.intersection(link)}
+    state.links -= gone
+    state.frozen_links += len(gone)
+    state.rejected = {b for b in state.rejected if b.movement not in old_set}
+    state.pending = {
+        name: kept
+        for name, bearings in state.pending.items()
+        if (kept := [b for b in bearings if b.movement not in old_set])
+    }
+    graph.retable(state)
+    live_keys = [k for k in list(values.keys()) if k not in old_key_set]
+    graph.rebuild(state, values.extract(live_keys), solve=False)

@@ -1,17 +1,25 @@
 """Old keyframes folded into a linear prior (pipeline/joint/window.py): the prior's information
-against a Schur complement computed by hand, and a bearing map solved with its old keyframes
-marginalized against the same map solved whole."""
+against a Schur complement computed by hand, a bearing map solved with its old keyframes
+marginalized against the same map solved whole; the joint estimator with a window against the
+same estimator keeping every movement, both against the truth."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import gtsam
 import numpy as np
 import pytest
 
+from data_schemas.errors import EstimationError
+from data_schemas.paper_arena import PAPER_REFERENCE
+from pipeline.frame_change import to_fl
 from pipeline.joint import graph as g
-from pipeline.joint.window import FrozenBearings, marginalize
+from pipeline.joint.estimator import JointSlam
+from pipeline.joint.state import FrozenBearings
+from pipeline.joint.window import DEFAULT_WINDOW, MIN_WINDOW, marginalize
+from pipeline.synthetic import SimulatedRun, scatter_landmarks, simulate_bearings
 
 
 def _information(
@@ -174,3 +182,133 @@ def test_frozen_bearings_add_and_drop_a_landmark() -> None:
     assert less.landmark.tolist() == [3, 3]
     assert less.residual_rad.tolist() == [-0.2, 0.4]
     assert less.rejected.tolist() == [True, False]
+
+
+# ---------------------------------------------------------------- the joint estimator's window
+EPS = math.radians(3.0)
+
+
+def _long_run(n: int, seed: int, **arena: object) -> SimulatedRun:
+    """``n`` movements with driven distances (2% noise), as ``process`` gives them."""
+    rng = np.random.default_rng(seed)
+    run = simulate_bearings(n, rng, eps_rad=EPS, **arena)  # type: ignore[arg-type]
+    lengths = np.hypot(*(run.o2_world - run.o1_world).T)
+    obs = [
+        replace(o, distance_m=float(d * (1.0 + rng.normal(0.0, 0.02))))
+        for o, d in zip(run.observations, lengths, strict=True)
+    ]
+    return replace(run, observations=obs)
+
+
+def _mapped(run: SimulatedRun, seed: int, window: int | None, **kw: object) -> JointSlam:
+    slam = JointSlam(
+        list(run.landmarks_world),
+        PAPER_REFERENCE,
+        vision_error_rad=EPS,
+        rng=np.random.default_rng(seed),
+        distance_prior_rel=0.05,
+        window=window,
+        **kw,  # type: ignore[arg-type]
+    )
+    for obs in run.observations:
+        slam.process_movement(obs)
+    return slam
+
+
+def _landmark_error(slam: JointSlam, run: SimulatedRun) -> float:
+    truth = run.truth_fl()
+    return float(np.mean([np.hypot(*(e.mean_fl - truth[n])) for n, e in slam.estimates.items()]))
+
+
+def _keyframe_errors(slam: JointSlam, run: SimulatedRun, movements: range) -> np.ndarray:
+    """Distances (FL) of the O1 keyframes of ``movements`` from where the robot was."""
+    l1, l2 = run.landmarks_world["L1"], run.landmarks_world["L2"]
+    poses = slam.keyframe_poses()
+    return np.array(
+        [np.hypot(*(poses[k, 0].origin_fl - to_fl(run.o1_world[k], l1, l2))) for k in movements]
+    )
+
+
+@pytest.mark.slow
+def test_a_windowed_map_stays_bounded_and_as_accurate_as_the_whole_one() -> None:
+    run = _long_run(120, 3)
+    windowed, whole = (
+        _mapped(run, 3, window=50, n_r=30, n_l=100),
+        _mapped(run, 3, window=None, n_r=30, n_l=100),
+    )
+    # the oldest 50 movements left the graph once the map held 100; the rest are in it
+    assert sorted(windowed._state.frozen) == list(range(50))
+    assert sorted(windowed._state.placed) == list(range(50, 120))
+    assert not windowed._map.isam.valueExists(g.pose_key(49, 1))
+    assert windowed._map.isam.valueExists(g.pose_key(50, 0))
+    # every movement is still reported, frozen ones where they were when they left
+    assert windowed.used_movements == whole.used_movements == list(range(120))
+    poses, whole_poses = windowed.keyframe_poses(), whole.keyframe_poses()
+    assert sorted(poses) == sorted(whole_poses)
+    trajectory = dict(zip(windowed.used_movements, windowed.trajectory_fl, strict=True))
+    for k in range(50):
+        np.testing.assert_array_equal(trajectory[k][0][0], poses[k, 0].origin_fl)
+    # as accurate as the whole map, landmarks and old keyframes, against the truth
+    assert _landmark_error(windowed, run) <= 1.2 * _landmark_error(whole, run) + 1e-3
+    old = range(50)
+    assert (
+        np.median(_keyframe_errors(windowed, run, old))
+        <= 1.2 * np.median(_keyframe_errors(whole, run, old)) + 1e-3
+    )
+    # an old keyframe's covariance is the whole map's when it left: never below the final one
+    # (the map only learnt since), and not far above it
+    ratios = [np.trace(poses[k].cov) / np.trace(whole_poses[k].cov) for k in poses if k[0] < 50]
+    assert min(ratios) >= 0.95 and max(ratios) <= 2.0
+
+
+def test_forgetting_a_landmark_takes_it_out_of_the_prior_and_history_skips_frozen_movements() -> (
+    None
+):
+    run = _long_run(110, 5)
+    slam = _mapped(run, 5, window=50, n_r=30, n_l=100)
+    # the oldest 50 movements left the graph once the map held 100
+    assert sorted(slam._state.frozen) == list(range(50))
+    assert sorted(slam._state.placed) == list(range(50, 110))
+    assert not slam._map.isam.valueExists(g.pose_key(49, 1))
+    assert slam.used_movements == list(range(110))
+    assert slam._state.prior is not None
+    key = g.landmark_key(slam._lm_index["L3"])
+    assert key in list(slam._state.prior.keys())
+    slam.forget("L3")
+    assert "L3" not in slam.estimates
+    assert slam._state.prior is not None and key not in list(slam._state.prior.keys())
+    assert not (slam._state.frozen_bearings.landmark == slam._lm_index["L3"]).any()
+    truth = run.truth_fl()
+    assert np.hypot(*(slam.estimates["L4"].mean_fl - truth["L4"])) < 0.05
+    # its history comes back for the movements in the graph only
+    first_live = min(slam._state.placed)
+    slam.add_history("L3", [(0, 0, 0.3), (first_live, 1, 0.2)])
+    assert [b.movement for b in slam._state.pending["L3"]] == [first_live]
+    assert all(b.landmark != "L3" for b in slam._state.frozen[0].movement.bearings)
+
+
+def test_window_shorter_than_the_careful_start_is_refused() -> None:
+    run = _long_run(2, 1)
+    with pytest.raises(EstimationError, match="window"):
+        _mapped(run, 1, window=MIN_WINDOW - 1)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_long_windowed_map_of_16_landmarks_is_as_accurate_as_the_whole_one(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    ref = {"L1": (1.2, 1.7), "L2": (1.8, 1.7)}
+    pts = scatter_landmarks(rng, ref, 16, (0.05, 0.05), (2.95, 1.95), 0.12)
+    run = _long_run(
+        400, seed, sigma_frac=1 / 3, landmarks_world=pts, arena_m=(3.0, 2.0), move_m=(0.3, 0.6)
+    )
+    small = {"n_r": 30, "n_l": 100}  # the initializer only seeds
+    windowed = _mapped(run, seed, window=DEFAULT_WINDOW, **small)
+    whole = _mapped(run, seed, window=None, **small)
+    assert len(windowed._state.frozen) >= 250
+    assert _landmark_error(windowed, run) <= 1.2 * _landmark_error(whole, run) + 1e-3
+    old = range(200)
+    assert (
+        np.median(_keyframe_errors(windowed, run, old))
+        <= 1.2 * np.median(_keyframe_errors(whole, run, old)) + 1e-3
+    )
