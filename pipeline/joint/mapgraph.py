@@ -487,8 +487,12 @@ class MapGraph:
             r = self.all_residuals(state)
             state.noise = estimate_noise(r, state.n_params(), s.sigma0_rad, s.eps_rad)
         scale = state.covariance_scale()
+        names = sorted(state.in_graph - set(s.reference), key=s.index.__getitem__)
         out = {}
-        for name in sorted(state.in_graph - set(s.reference), key=s.index.__getitem__):
-            cov = np.asarray(self.isam.marginalCovariance(self.key(name)), np.float64) * scale
-            out[name] = LandmarkEstimate(self.point(name), 0.5 * (cov + cov.T))
+        if names:  # one joint marginal: the landmarks share the root of the Bayes tree
+            joint = self.isam.jointMarginalCovariance([self.key(n) for n in names])
+            for name in names:
+                key = self.key(name)
+                cov = np.asarray(joint.at(key, key), np.float64) * scale
+                out[name] = LandmarkEstimate(self.point(name), 0.5 * (cov + cov.T))
         state.estimates = out
