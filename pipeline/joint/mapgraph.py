@@ -415,6 +415,20 @@ class MapGraph:
         self.isam = self.new_isam(len(state.placed))
         self.update(graph, values)
 
+    def restart(
+        self,
+        state: MapState,
+        factors: gtsam.NonlinearFactorGraph,
+        bearings: Mapping[int, g.Bearing],
+        values: gtsam.Values,
+    ) -> None:
+        """A fresh iSAM2 over ``factors`` (the factor at position ``i`` is the bearing
+        ``bearings[i]``, when there is one) from ``values``, without a new solve."""
+        self.factor_of.clear()
+        self._staged = sorted(bearings.items())
+        self.isam = self.new_isam(len(state.placed))
+        self.update(factors, values)
+
     def restore(self, state: MapState, values: gtsam.Values) -> None:
         """The graph of ``state`` (a snapshot taken with ``values``) again: rebuilt from
         ``values``, or empty when no movement is placed."""

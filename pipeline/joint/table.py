@@ -100,6 +100,19 @@ class BearingTable:
             self._rejected[rows] = rejected
             self.version += 1
 
+    def subset(self, mask: NDArray[np.bool_]) -> BearingTable:
+        """A new table of the rows where ``mask`` (n,) holds, in their order."""
+        out = BearingTable()
+        rows = np.flatnonzero(mask)
+        out.rows = [self.rows[i] for i in rows]
+        out._row_of = {b: i for i, b in enumerate(out.rows)}
+        out._slot = self.slot[rows]
+        out._landmark = self.landmark[rows]
+        out._bearing_rad = self.bearing_rad[rows]
+        out._rejected = self.rejected[rows]
+        out.version = self.version + 1
+        return out
+
     def select(self, mask: NDArray[np.bool_]) -> list[g.Bearing]:
         """The bearings of the rows where ``mask`` (n,) holds."""
         return [self.rows[i] for i in np.flatnonzero(mask)]

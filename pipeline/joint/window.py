@@ -180,14 +180,21 @@ def marginalize_oldest(state: MapState, graph: MapGraph, window: int) -> None:
     values = graph.values
     old_keys = [g.pose_key(k, end) for k in old for end in (0, 1)]
     old_key_set = set(old_keys)
+    # the factors that touch an old keyframe (and the prior) are folded; the rest are kept
+    bearing_at = {i: b for b, i in graph.factor_of.items()}
     factors = graph.isam.getFactorsUnsafe()
-    touching = []
+    touching, rest = [], gtsam.NonlinearFactorGraph()
+    rest_bearings: dict[int, g.Bearing] = {}
     for i in range(factors.size()):
         f = factors.at(i)
-        if f is not None and (
-            isinstance(f, gtsam.LinearContainerFactor) or not old_key_set.isdisjoint(f.keys())
-        ):
+        if f is None:  # taken out (a rejected bearing)
+            continue
+        if isinstance(f, gtsam.LinearContainerFactor) or not old_key_set.isdisjoint(f.keys()):
             touching.append(f)
+            continue
+        if i in bearing_at:
+            rest_bearings[rest.size()] = bearing_at[i]
+        rest.add(f)
     isam = graph.isam
 
     def joint(keys: list[int]) -> NDArray[np.float64]:
@@ -218,6 +225,8 @@ def marginalize_oldest(state: MapState, graph: MapGraph, window: int) -> None:
         for name, bearings in state.pending.items()
         if (kept := [b for b in bearings if b.movement not in old_set])
     }
-    graph.retable(state)
+    if done.prior is not None:
+        rest.add(done.prior)
+    graph.table = graph.table.subset(~rows)
     live_keys = [k for k in list(values.keys()) if k not in old_key_set]
-    graph.rebuild(state, values.extract(live_keys), solve=False)
+    graph.restart(state, rest, rest_bearings, values.extract(live_keys))
