@@ -61,6 +61,9 @@ def reseat_landmarks(state: MapState, graph: MapGraph) -> list[str]:
     map is then rebuilt with those bearings back in."""
     settings, table = graph.settings, graph.table
     eps = settings.eps_rad
+    n_out_of = np.bincount(table.landmark[table.rejected], minlength=len(settings.landmarks))
+    if not (n_out_of >= RESEAT_MIN_REJECTED).any():  # no landmark has enough out (most often)
+        return []
     skip = settings.reference_indices()
     n_rows = by_landmark(table, np.ones(len(table), np.int64), skip)
     n_rejected = by_landmark(table, table.rejected.astype(np.int64), skip)

@@ -2,11 +2,17 @@
 
 Synthetic bearings (no images), every movement with its driven distance (2% noise) and the
 distance prior ``process`` uses. CPU time (``time.process_time``) per movement of
-``JointSlam.process_movement``.
+``JointSlam.process_movement``, with its default window of 100 movements (older ones
+marginalized, ``pipeline/joint/window.py``) unless said otherwise.
 
 ``test_marginal_cost_late_against_early``: 1,000 movements on the paper arena (4 landmarks) and
 on a 16-landmark arena (3 x 2 m); the yardstick is the same run early: the median CPU per
-movement over movements 500-999 against that over movements 50-99. Goal: at most 1.3x.
+movement over movements 500-999 against that over movements 50-99. Goal: at most 1.3x. The
+means (which count the rebuild of the graph every 50 movements) are printed beside.
+
+``test_window_against_whole_map``: the same runs (600 movements, two seeds per arena) with the
+window and keeping every movement (``window=None``), alternated: CPU of the whole run and the
+mean error of the final map against the truth.
 
 ``test_update_against_plain_isam2``: per movement, the estimator's own work (its whole
 ``process_movement`` less the paper filter it runs as initializer) against a plain iSAM2 (GTSAM's
@@ -15,8 +21,9 @@ same factors and initial values, the two alternated movement by movement. Goal: 
 3x.
 
 ``test_growth_law``: the CPU per movement against movements and landmarks (4, 8, 16, 32
-landmarks, 1,000 movements each), written with a plot to ``$BSLAM_BENCH_OUT`` (default: a
-temporary folder) as ``growth.json`` and ``growth.png`` (docs/benchmarks.md).
+landmarks, 1,000 movements each, with the window and keeping every movement), written with a
+plot to ``$BSLAM_BENCH_OUT`` (default: a temporary folder) as ``growth.json`` and
+``growth.png`` (docs/benchmarks.md).
 
 Run with ``python -m pytest tests/bench/test_bench_growth.py -s -n 0``.
 """
@@ -39,6 +46,7 @@ import pytest
 from pipeline.joint.estimator import JointSlam
 from pipeline.joint.mapgraph import MapGraph
 from pipeline.joint.state import JointSettings
+from pipeline.joint.window import DEFAULT_WINDOW
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, scatter_landmarks, simulate_bearings
 
@@ -71,19 +79,22 @@ def _run(n_movements: int, n_landmarks: int, seed: int) -> SimulatedRun:
     return replace(run, observations=obs)
 
 
-def _slam(run: SimulatedRun, seed: int) -> JointSlam:
+def _slam(run: SimulatedRun, seed: int, window: int | None = DEFAULT_WINDOW) -> JointSlam:
     return JointSlam(
         list(run.landmarks_world),
         PAPER_REFERENCE,
         vision_error_rad=EPS,
         rng=np.random.default_rng(seed),
         distance_prior_rel=DISTANCE_PRIOR_REL,
+        window=window,
     )
 
 
-def _cpu_per_movement(run: SimulatedRun, seed: int) -> tuple[list[float], float]:
+def _cpu_per_movement(
+    run: SimulatedRun, seed: int, window: int | None = DEFAULT_WINDOW
+) -> tuple[list[float], float]:
     """CPU seconds of each movement, and the mean error of the final map (FL)."""
-    slam = _slam(run, seed)
+    slam = _slam(run, seed, window)
     spent = []
     for obs in run.observations:
         tick = time.process_time()
@@ -107,14 +118,43 @@ def test_marginal_cost_late_against_early(n_landmarks: int, benchmark: Any) -> N
     early = statistics.median(spent[50:100])
     late = statistics.median(spent[500:1000])
     ratio = late / early
+    mean_early, mean_late = statistics.mean(spent[50:100]), statistics.mean(spent[500:1000])
     print(
         f"\n{n_landmarks} landmarks: CPU per movement early (50-99) {1e3 * early:.2f} ms, "
-        f"late (500-999) {1e3 * late:.2f} ms, ratio {ratio:.2f} (goal 1.3); "
+        f"late (500-999) {1e3 * late:.2f} ms, ratio {ratio:.2f} (goal 1.3); means "
+        f"{1e3 * mean_early:.2f} and {1e3 * mean_late:.2f} ms, ratio {mean_late / mean_early:.2f}; "
         f"mean error of the final map {err:.4f} FL"
     )
-    benchmark.extra_info.update(early_ms=1e3 * early, late_ms=1e3 * late, ratio=ratio)
+    benchmark.extra_info.update(
+        early_ms=1e3 * early,
+        late_ms=1e3 * late,
+        ratio=ratio,
+        mean_early_ms=1e3 * mean_early,
+        mean_late_ms=1e3 * mean_late,
+    )
     benchmark.pedantic(lambda: None, rounds=1, iterations=1)
     assert ratio <= 1.3
+
+
+@pytest.mark.parametrize("n_landmarks", [4, 16])
+def test_window_against_whole_map(n_landmarks: int, benchmark: Any) -> None:
+    cpu: dict[str, list[float]] = {"window": [], "whole": []}
+    err: dict[str, list[float]] = {"window": [], "whole": []}
+    for seed in (4, 5):
+        run = _run(600, n_landmarks, seed)
+        for label, window in (("window", DEFAULT_WINDOW), ("whole", None)):
+            spent, e = _cpu_per_movement(run, seed, window)
+            cpu[label].append(sum(spent))
+            err[label].append(e)
+    for label in cpu:
+        print(
+            f"\n{n_landmarks} landmarks, {label}: whole run {statistics.median(cpu[label]):.1f} s "
+            f"CPU (seeds 4, 5: {', '.join(f'{c:.1f}' for c in cpu[label])}), mean error of the "
+            f"final map {', '.join(f'{e:.4f}' for e in err[label])} FL",
+            end="",
+        )
+    benchmark.extra_info.update(cpu_s=cpu, mean_error_fl=err)
+    benchmark.pedantic(lambda: None, rounds=1, iterations=1)
 
 
 class _RecordingGraph(MapGraph):
@@ -190,13 +230,22 @@ def test_growth_law(tmp_path_factory: pytest.TempPathFactory, benchmark: Any) ->
     out = _out_dir(tmp_path_factory)
     table: dict[str, Any] = {}
     for n_landmarks in (4, 8, 16, 32):
-        spent, err = _cpu_per_movement(_run(1000, n_landmarks, 3), 3)
-        table[str(n_landmarks)] = {
-            "cpu_ms": [1e3 * s for s in spent],
-            "median_ms": {f"{a}-{b - 1}": 1e3 * statistics.median(spent[a:b]) for a, b in WINDOWS},
-            "mean_error_fl": err,
-        }
-        print(f"\n{n_landmarks} landmarks: {table[str(n_landmarks)]['median_ms']}, error {err:.4f}")
+        run = _run(1000, n_landmarks, 3)
+        for label, window in (("window", DEFAULT_WINDOW), ("whole", None)):
+            spent, err = _cpu_per_movement(run, 3, window)
+            row = table[f"{n_landmarks} {label}"] = {
+                "cpu_ms": [1e3 * s for s in spent],
+                "median_ms": {
+                    f"{a}-{b - 1}": 1e3 * statistics.median(spent[a:b]) for a, b in WINDOWS
+                },
+                "mean_ms": {f"{a}-{b - 1}": 1e3 * statistics.mean(spent[a:b]) for a, b in WINDOWS},
+                "whole_run_s": sum(spent),
+                "mean_error_fl": err,
+            }
+            print(
+                f"\n{n_landmarks} landmarks, {label}: medians {row['median_ms']}, means "
+                f"{row['mean_ms']}, whole run {sum(spent):.1f} s, error {err:.4f}"
+            )
     (out / "growth.json").write_text(json.dumps(table) + "\n")
     import matplotlib
 
@@ -204,16 +253,24 @@ def test_growth_law(tmp_path_factory: pytest.TempPathFactory, benchmark: Any) ->
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 3.6), dpi=100)
-    for n_landmarks, row in table.items():
+    colours = {n: f"C{i}" for i, n in enumerate(("4", "8", "16", "32"))}
+    for name, row in table.items():
+        size, label = name.split()
         ms = np.array(row["cpu_ms"])
         k = 50  # running median over 50 movements
         smooth = [float(np.median(ms[i : i + k])) for i in range(0, ms.size - k + 1, 10)]
-        ax.plot(np.arange(len(smooth)) * 10 + k / 2, smooth, label=f"{n_landmarks} landmarks")
+        ax.plot(
+            np.arange(len(smooth)) * 10 + k / 2,
+            smooth,
+            color=colours[size],
+            linestyle="-" if label == "window" else ":",
+            label=f"{size} landmarks" + ("" if label == "window" else ", every movement"),
+        )
     ax.set_xlabel("movement")
     ax.set_ylabel("CPU per movement (ms, median of 50)")
     ax.set_yscale("log")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(out / "growth.png")
     print(f"written {out / 'growth.json'}, {out / 'growth.png'}")
