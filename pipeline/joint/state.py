@@ -2,10 +2,12 @@
 
 :class:`MapState` is the one object a rollback restores (the movements placed or waiting, the
 landmarks in the graph and the bearings waiting for theirs, the rejected bearings, the estimates
-and the bearing noise); everything else of the joint estimator (the iSAM2 graph, the bearing
-table, the factor indices: :class:`pipeline.joint.mapgraph.MapGraph`) is derived from it and
-rebuilt after a rollback. The parts of the estimator receive the state as an argument and
-change it in place; none of them keeps it.
+and the bearing noise, and the movements marginalized out of the graph with the prior they
+left: :class:`FrozenMovement`, :class:`FrozenBearings`); everything else of the joint
+estimator (the iSAM2 graph, the bearing table, the factor indices:
+:class:`pipeline.joint.mapgraph.MapGraph`) is derived from it and rebuilt after a rollback.
+The parts of the estimator receive the state as an argument and change it in place; none of
+them keeps it.
 """
 
 from __future__ import annotations

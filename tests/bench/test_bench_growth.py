@@ -20,6 +20,9 @@ default parameters, one ``update()`` per update of the estimator, nothing else c
 same factors and initial values, the two alternated movement by movement. Goal: medians at most
 3x.
 
+``test_estimator_and_association_late_at_32_landmarks``: association of 32 identical landmarks
+with the estimator, 300 movements; CPU per landmark per movement late (200-299). Goal: at most 1 ms.
+
 ``test_growth_law``: the CPU per movement against movements and landmarks (4, 8, 16, 32
 landmarks, 1,000 movements each, with the window and keeping every movement), written with a
 plot to ``$BSLAM_BENCH_OUT`` (default: a temporary folder) as ``growth.json`` and
@@ -34,6 +37,7 @@ import json
 import math
 import os
 import statistics
+import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -49,6 +53,9 @@ from pipeline.joint.state import JointSettings
 from pipeline.joint.window import DEFAULT_WINDOW
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, scatter_landmarks, simulate_bearings
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pipeline"))
+from alike_synthetic import run_synthetic
 
 EPS = math.radians(3.0)
 DISTANCE_PRIOR_REL = 0.05  # replay's default (pipeline.estimators.DEFAULT_DISTANCE_PRIOR_REL)
@@ -155,6 +162,24 @@ def test_window_against_whole_map(n_landmarks: int, benchmark: Any) -> None:
         )
     benchmark.extra_info.update(cpu_s=cpu, mean_error_fl=err)
     benchmark.pedantic(lambda: None, rounds=1, iterations=1)
+
+
+def test_estimator_and_association_late_at_32_landmarks(benchmark: Any) -> None:
+    """32 identical landmarks and a distinct reference pair, every name given by association
+    (``tests/pipeline/alike_synthetic.py``), 300 movements: CPU per landmark per movement of
+    association plus the estimator, medians over movements 50-99 and 200-299."""
+    run = run_synthetic(32, 0, moves=300)
+    spent = run.movement_cpu_seconds
+    early = 1e3 * statistics.median(spent[50:100]) / 32
+    late = 1e3 * statistics.median(spent[200:300]) / 32
+    print(
+        f"\n32 landmarks: estimator + association {early:.2f} ms per landmark per movement at "
+        f"movements 50-99, {late:.2f} at 200-299 (goal 1); "
+        f"mean {1e3 * statistics.mean(spent[200:300]) / 32:.2f}"
+    )
+    benchmark.extra_info.update(early_ms_per_landmark=early, late_ms_per_landmark=late)
+    benchmark.pedantic(lambda: None, rounds=1, iterations=1)
+    assert late <= 1.0
 
 
 class _RecordingGraph(MapGraph):
