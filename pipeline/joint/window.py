@@ -185,16 +185,23 @@ def marginalize_oldest(state: MapState, graph: MapGraph, window: int) -> None:
     factors = graph.isam.getFactorsUnsafe()
     touching, rest = [], gtsam.NonlinearFactorGraph()
     rest_bearings: dict[int, g.Bearing] = {}
+    n_rest = 0  # factors of ``rest`` other than bearings
     for i in range(factors.size()):
         f = factors.at(i)
         if f is None:  # taken out (a rejected bearing)
             continue
-        if isinstance(f, gtsam.LinearContainerFactor) or not old_key_set.isdisjoint(f.keys()):
+        b = bearing_at.get(i)
+        if b is not None:  # most factors: a bearing, whose movement says where it goes
+            if b.movement in old_set:
+                touching.append(f)
+            else:
+                rest_bearings[len(rest_bearings) + n_rest] = b
+                rest.add(f)
+        elif isinstance(f, gtsam.LinearContainerFactor) or not old_key_set.isdisjoint(f.keys()):
             touching.append(f)
-            continue
-        if i in bearing_at:
-            rest_bearings[rest.size()] = bearing_at[i]
-        rest.add(f)
+        else:
+            rest.add(f)
+            n_rest += 1
     isam = graph.isam
 
     def joint(keys: list[int]) -> NDArray[np.float64]:
