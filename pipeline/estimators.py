@@ -12,7 +12,6 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
 
 from data_schemas.errors import EstimationError
 from pipeline.estimate import LandmarkEstimate
@@ -20,7 +19,7 @@ from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
 
 if TYPE_CHECKING:
-    from pipeline.geometry import KeyframePose
+    from pipeline.geometry import KeyframePose, MovementPose
     from pipeline.joint.noise import NoiseEstimate
 
 EstimatorName = Literal["joint", "paper"]
@@ -50,13 +49,8 @@ class AssociatingEstimator(Estimator, Protocol):
     def noise(self) -> NoiseEstimate | None:
         """Bearing noise estimated from the map's residuals (None: not yet)."""
 
-    @property
-    def used_movements(self) -> list[int]:
-        """Indices of the movements in the map, in order."""
-
-    @property
-    def trajectory_fl(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Per movement of :attr:`used_movements`, O1 and O2 as (1, 2) arrays in FL."""
+    def movement_poses(self) -> dict[int, MovementPose]:
+        """Every movement in the map, by index (in order), as it is placed now (FL)."""
 
     @property
     def bearing_scatter(self) -> dict[str, tuple[int, float]]:

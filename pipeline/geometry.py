@@ -63,6 +63,14 @@ class MovementPose:
     heading_rad: float
     length_fl: float
 
+    @classmethod
+    def from_ends(
+        cls, o1_fl: NDArray[np.float64], heading_rad: float, o2_fl: NDArray[np.float64]
+    ) -> MovementPose:
+        """The movement from keyframe O1 (2,) with its heading to keyframe O2 (2,): its length
+        is their distance (at least 1e-9 FL), its heading O1's."""
+        return cls(o1_fl, heading_rad, max(float(np.hypot(*(o2_fl - o1_fl))), 1e-9))
+
     @property
     def o2_fl(self) -> NDArray[np.float64]:
         """End keyframe position (2,)."""

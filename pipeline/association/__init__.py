@@ -15,7 +15,7 @@ docs/method.md (association).
 from pipeline.association.assign import Assignment, MovementAssignment, assign, assign_movement
 from pipeline.association.predict import predict_bearings, ray_point_cov
 from pipeline.association.result import MovementAssociation
-from pipeline.association.tracker import Associator, pose_between
+from pipeline.association.tracker import Associator
 
 __all__ = [
     "Assignment",
@@ -24,7 +24,6 @@ __all__ = [
     "MovementAssociation",
     "assign",
     "assign_movement",
-    "pose_between",
     "predict_bearings",
     "ray_point_cov",
 ]

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from data_schemas.session import Session, shared_classes
 from pipeline.association.final import FinalDetection
 from pipeline.association.result import MovementAssociation
-from pipeline.association.tracker import Associator, pose_between
+from pipeline.association.tracker import Associator
 from pipeline.bearings import Detection, camera_view_rad
 from pipeline.estimators import AssociatingEstimator, Estimator
 from pipeline.geometry import KeyframePose
@@ -99,17 +99,8 @@ class AlikeLandmarks:
         self, assoc: MovementAssociation, result: MovementResult, estimator: AssociatingEstimator
     ) -> None:
         """Grow the hypotheses with the movement as the estimator placed it; name confirmed ones."""
-        pose = None
-        if (
-            result.status == MovementStatus.OK
-            and result.o1_fl is not None
-            and result.o2_fl is not None
-        ):
-            pose = pose_between(result.o1_fl, result.o2_fl)
-        trajectory = {
-            k: pose_between(o1, o2)
-            for k, (o1, o2) in zip(estimator.used_movements, estimator.trajectory_fl, strict=True)
-        }
+        trajectory = estimator.movement_poses()
+        pose = trajectory.get(result.index) if result.status == MovementStatus.OK else None
         self.associator.hypothesize(
             assoc, pose, estimator.estimates, trajectory, estimator.bearing_scatter
         )

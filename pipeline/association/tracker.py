@@ -34,7 +34,6 @@ landmark the detections it leaves unexplained point at (:mod:`pipeline.associati
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -349,11 +348,3 @@ class Associator:
         :meth:`associate_final`'s association, ``poses`` and ``mapped`` the final map,
         ``index`` the last movement. Returns what changed, or None when nothing did."""
         return repair_final(self.lifecycle, final, poses, mapped, index)
-
-
-def pose_between(o1_fl: NDArray[np.float64], o2_fl: NDArray[np.float64]) -> MovementPose:
-    """The movement from O1 to O2 (each (2,), or particles (m, 2) whose mean is taken; FL)."""
-    o1 = np.asarray(o1_fl, np.float64).reshape(-1, 2).mean(axis=0)
-    o2 = np.asarray(o2_fl, np.float64).reshape(-1, 2).mean(axis=0)
-    d = o2 - o1
-    return MovementPose(o1, math.atan2(d[1], d[0]), max(float(np.hypot(*d)), 1e-6))

@@ -32,14 +32,13 @@ from dataclasses import replace
 
 import gtsam
 import numpy as np
-from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from data_schemas.errors import EstimationError
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
 from pipeline.fusion import PAPER_N_L, PAPER_N_R
-from pipeline.geometry import KeyframePose
+from pipeline.geometry import KeyframePose, MovementPose
 from pipeline.joint import graph as g
 from pipeline.joint import placement, robustness
 from pipeline.joint.mapgraph import CAREFUL_MOVEMENTS, MapGraph
@@ -191,19 +190,18 @@ class JointSlam:
         """Indices of the movements not placed (yet)."""
         return sorted(self._state.waiting)
 
-    @property
-    def trajectory_fl(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Per movement placed in the map (index order), O1 and O2 as (1, 2) arrays in FL (a
-        marginalized movement: where it was when it left the graph)."""
-        out = []
+    def movement_poses(self) -> dict[int, MovementPose]:
+        """Every movement placed in the map, by index (in order): O1, the heading of O1 and the
+        distance O1 -> O2 (FL), as iSAM2 has them now (a marginalized movement: where it was
+        when it left the graph)."""
+        out = {}
         for k in self.used_movements:
             frozen = self._state.frozen.get(k)
-            if frozen is not None:
-                (x1, y1, _), (x2, y2, _) = frozen.poses
-                out.append((np.array([[x1, y1]]), np.array([[x2, y2]])))
+            if frozen is None:
+                out[k] = self._map.movement_pose(k)
                 continue
-            mp = self._map.movement_pose(k)
-            out.append((mp.o1_fl[None, :], mp.o2_fl[None, :]))
+            (x1, y1, heading), (x2, y2, _) = frozen.poses
+            out[k] = MovementPose.from_ends(np.array([x1, y1]), heading, np.array([x2, y2]))
         return out
 
     def keyframe_poses(self) -> dict[tuple[int, int], KeyframePose]:

@@ -146,9 +146,9 @@ class MapGraph:
             p1, p2 = self.pose2(k1), self.pose2(k2)
         else:
             p1, p2 = values.atPose2(k1), values.atPose2(k2)
-        o1 = np.array([p1.x(), p1.y()])
-        o2 = np.array([p2.x(), p2.y()])
-        return MovementPose(o1, p1.theta(), max(float(np.hypot(*(o2 - o1))), 1e-9))
+        return MovementPose.from_ends(
+            np.array([p1.x(), p1.y()]), p1.theta(), np.array([p2.x(), p2.y()])
+        )
 
     def unit_m(self) -> float | None:
         """The map's unit |L1 L2| in metres from the scale variable (None without it)."""

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.association import Associator, MovementAssociation, pose_between
+from pipeline.association import Associator, MovementAssociation
 from pipeline.association.final import FinalDetection
 from pipeline.estimators import make_estimator
 from pipeline.fusion import PAPER_N_L, PAPER_N_R
@@ -177,11 +177,8 @@ def run_synthetic(
                 obs.index, {**unique[0], **a.bearings_o1_rad}, {**unique[1], **a.bearings_o2_rad}
             )
         )
-        pose = None
-        if res.status == "ok" and res.o1_fl is not None and res.o2_fl is not None:
-            pose = pose_between(res.o1_fl, res.o2_fl)
-        path = zip(slam.used_movements, slam.trajectory_fl, strict=True)  # type: ignore[attr-defined]
-        trajectory = {k: pose_between(*ends) for k, ends in path}
+        trajectory = slam.movement_poses()  # type: ignore[attr-defined]
+        pose = trajectory.get(obs.index) if res.status == "ok" else None
         t_assoc = time.perf_counter()
         assoc.hypothesize(a, pose, slam.estimates, trajectory, slam.bearing_scatter)  # type: ignore[attr-defined]
         out.association_seconds += time.perf_counter() - t_assoc

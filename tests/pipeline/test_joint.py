@@ -429,7 +429,7 @@ def test_distance_prior_finds_the_map_scale_in_metres() -> None:
     slam = _joint(run, PAPER_REFERENCE, 4, distance_prior_rel=0.05)
     assert slam.unit_m is not None
     assert slam.unit_m == pytest.approx(0.30, rel=0.08)
-    lengths = [float(np.hypot(*(o2 - o1)[0])) * slam.unit_m for o1, o2 in slam.trajectory_fl]
+    lengths = [mp.length_fl * slam.unit_m for mp in slam.movement_poses().values()]
     truth = np.hypot(*(run.o2_world - run.o1_world).T)
     assert np.allclose(lengths, truth, rtol=0.12)
     # a wrong distance (a wheel that slipped 50%) moves the scale by far less than 50% / 10

@@ -245,9 +245,11 @@ def test_a_windowed_map_stays_bounded_and_as_accurate_as_the_whole_one() -> None
     assert windowed.used_movements == whole.used_movements == list(range(120))
     poses, whole_poses = windowed.keyframe_poses(), whole.keyframe_poses()
     assert sorted(poses) == sorted(whole_poses)
-    trajectory = dict(zip(windowed.used_movements, windowed.trajectory_fl, strict=True))
+    trajectory = windowed.movement_poses()
+    assert list(trajectory) == list(range(120))
     for k in range(50):
-        np.testing.assert_array_equal(trajectory[k][0][0], poses[k, 0].origin_fl)
+        np.testing.assert_array_equal(trajectory[k].o1_fl, poses[k, 0].origin_fl)
+        assert trajectory[k].heading_rad == poses[k, 0].heading_rad
     # as accurate as the whole map, landmarks and old keyframes, against the truth
     assert _landmark_error(windowed, run) <= 1.2 * _landmark_error(whole, run) + 1e-3
     old = range(50)
