@@ -80,6 +80,17 @@ class JointSlam:
         Movements kept in the graph (at least :data:`pipeline.joint.window.MIN_WINDOW`);
         older ones are marginalized into a prior on the rest (:mod:`pipeline.joint.window`),
         so that the cost per movement does not grow with the log. None keeps every movement.
+
+    Attributes
+    ----------
+    paper : BearingSlam
+        The initializer.
+    settings : JointSettings
+        The settings above but the window, as the parts of the estimator take them.
+    window : int or None
+        As given.
+    reinitializations : int
+        How many times the map diverged and was re-initialized from the particles.
     """
 
     def __init__(
@@ -114,23 +125,16 @@ class JointSlam:
         if window is not None and window < MIN_WINDOW:
             raise EstimationError(f"window must be at least {MIN_WINDOW} movements, got {window}")
         self.window = window
-        self.landmarks = list(self.paper.landmarks)
-        self.reference = reference
-        self.eps_rad = float(vision_error_rad)
-        self.robust = robust
-        self.turn_prior_sigma_rad = turn_prior_sigma_rad
-        self.distance_prior_rel = distance_prior_rel
-        self.divergence_rms_rad = self.eps_rad if divergence_rms_rad is None else divergence_rms_rad
-        self.sigma0_rad = truncated_gaussian_std(self.eps_rad)
+        eps_rad = float(vision_error_rad)
         self.settings = JointSettings(
-            landmarks=tuple(self.landmarks),
+            landmarks=tuple(self.paper.landmarks),
             reference=reference,
-            eps_rad=self.eps_rad,
-            sigma0_rad=self.sigma0_rad,
+            eps_rad=eps_rad,
+            sigma0_rad=truncated_gaussian_std(eps_rad),
             robust=robust,
             turn_prior_sigma_rad=turn_prior_sigma_rad,
             distance_prior_rel=distance_prior_rel,
-            divergence_rms_rad=self.divergence_rms_rad,
+            divergence_rms_rad=eps_rad if divergence_rms_rad is None else divergence_rms_rad,
         )
         self._lm_index = self.settings.index
         self._state = MapState.empty(self.settings)
@@ -177,7 +181,7 @@ class JointSlam:
             v = np.concatenate(
                 [live.get(j, np.zeros(0)), frozen.residual_rad[frozen.landmark == j]]
             )
-            out[self.landmarks[j]] = (v.size, robust_std(v) / sigma)
+            out[self.settings.landmarks[j]] = (v.size, robust_std(v) / sigma)
         return out
 
     @property
@@ -230,7 +234,7 @@ class JointSlam:
     def forget(self, name: str) -> None:
         """Take landmark ``name`` out of the map with every bearing given to it so far (an
         association step found its name wrong); :meth:`add_history` may give it again."""
-        if name in self.reference or name not in self._lm_index:
+        if name in self.settings.reference or name not in self._lm_index:
             return
         for m in (*self._state.placed.values(), *self._state.waiting.values()):
             m.bearings[:] = [b for b in m.bearings if b.landmark != name]
@@ -308,7 +312,7 @@ class JointSlam:
         )
 
     def _process_movement(self, obs: MovementObservation) -> JointMovementResult:
-        mapped = self._state.in_graph - set(self.reference)
+        mapped = self._state.in_graph - set(self.settings.reference)
         p = self.paper.process_movement(self._initializing(obs, mapped))
         res = JointMovementResult(
             obs.index,
@@ -372,7 +376,7 @@ class JointSlam:
             values = placement.values_from_beliefs(self._state, self._map, self._belief)
             self._map.rebuild(self._state, values)
             still = robustness.misfit(
-                self._state, self._map, max(self.eps_rad, self.divergence_rms_rad)
+                self._state, self._map, max(self.settings.eps_rad, self.settings.divergence_rms_rad)
             )
             if still:
                 return self._roll_back(res, snap, m, divergence, still)
