@@ -2,11 +2,12 @@
 
 Modules: ``state`` (settings, movements, and :class:`~pipeline.joint.state.MapState`, what a
 rollback restores), ``placement`` (where a movement is placed), ``mapgraph`` (the iSAM2 graph's
-bookkeeping), ``robustness`` (outliers, reseating, divergence, rollback), ``graph`` (GTSAM keys
-and factors), ``noise`` (bearing noise from residuals), ``table`` (the map's bearings as arrays,
-for its residuals), ``result`` (per-movement result), ``estimator`` (:class:`JointSlam`, which
-composes them for one movement). The gtsam-free geometry it shares with association (resection,
-ray intersection) is :mod:`pipeline.geometry`. ``JointSlam`` is loaded on first use: ``gtsam``
+bookkeeping), ``robustness`` (outliers, reseating, divergence, rollback), ``window`` (old
+movements marginalized out of the graph), ``graph`` (GTSAM keys and factors), ``noise``
+(bearing noise from residuals), ``table`` (the map's bearings as arrays, for its residuals),
+``result`` (per-movement result), ``estimator`` (:class:`JointSlam`, which composes them for
+one movement). The gtsam-free geometry it shares with association (resection, ray
+intersection) is :mod:`pipeline.geometry`. ``JointSlam`` is loaded on first use: ``gtsam``
 costs ~0.3 s to import, and reading a result needs none of it.
 """
 

@@ -21,7 +21,9 @@ docs/method.md.
 - :mod:`pipeline.joint.mapgraph`: the graph bookkeeping (iSAM2, values, factors, bearing table,
   bootstrap batch solve, rebuild, estimates);
 - :mod:`pipeline.joint.robustness`: outlier rejection, reseating, the divergence check and
-  the rollback.
+  the rollback;
+- :mod:`pipeline.joint.window`: the oldest movements marginalized out of the graph once it
+  holds more than the window.
 """
 
 from __future__ import annotations
