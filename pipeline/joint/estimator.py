@@ -23,7 +23,7 @@ docs/method.md.
 - :mod:`pipeline.joint.robustness`: outlier rejection, reseating, the divergence check and
   the rollback;
 - :mod:`pipeline.joint.window`: the oldest movements marginalized out of the graph once it
-  holds more than the window.
+  holds :data:`~pipeline.joint.window.WINDOW_STRIDE` movements more than the window.
 """
 
 from __future__ import annotations
