@@ -1,0 +1,322 @@
+"""Joint compatibility branch and bound (Neira and Tardos 2001) for landmarks that look alike.
+
+A movement's detections of one shared class are assigned to the predicted bearings of the
+class's named landmarks from its keyframes, all at once. The predictions are correlated: the
+same landmark seen from both keyframes shares its position error, every landmark seen from one
+keyframe shares that keyframe's pose error. A hypothesis ``H`` pairs detections with
+predictions (each detection with at most one prediction of its own keyframe, each prediction
+with at most one detection: a landmark at most once per keyframe); its joint innovation
+``nu_H = wrap(z - h)`` has covariance ``S_H = P_H + r I`` (``P`` the predictions' joint
+covariance, ``r`` the bearing noise variance of a detection) and ``H`` is jointly compatible
+when every pair passes its own gate and ``D2_H = nu_H^T S_H^-1 nu_H`` is within the chi-square
+gate of ``|H|`` degrees of freedom. The search returns the jointly compatible hypothesis with
+the most pairs, the smallest ``D2_H`` among those; detections left out are spurious or of a
+landmark not named yet, predictions left out are not seen.
+
+``D2`` never decreases as pairs are added (a sub-vector's Mahalanobis norm under its marginal
+covariance is at most the whole vector's), so a branch that cannot reach more pairs than the
+best, or reaches as many only at a larger ``D2``, is cut. A pair of the answer is *ambiguous*
+when a hypothesis as large without it is jointly compatible at a ``D2`` within ``margin`` of
+the best: the data do not tell the two apart, and the caller should not trust either.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.angles import wrap_rad
+
+#: Probability mass inside the joint gate (and inside each pair's own gate).
+GATE_P = 0.999
+#: A pair is ambiguous when an assignment as large without it is within this ``D2``.
+MARGIN_CHI2 = 9.0
+#: Search nodes allowed per call; beyond it the best hypothesis found so far is returned.
+MAX_NODES = 50_000
+
+
+@functools.lru_cache(maxsize=256)
+def chi2_quantile(dof: int, p: float = GATE_P) -> float:
+    """Quantile ``p`` of the chi-square law with ``dof`` degrees of freedom."""
+    # scipy.special only (scipy.stats costs ~0.9 s to import)
+    from scipy.special import chdtri
+
+    return float(chdtri(dof, 1.0 - p))
+
+
+@dataclass(frozen=True)
+class JointPredictions:
+    """Predicted bearings of landmarks from keyframes and their joint covariance.
+
+    Attributes
+    ----------
+    bearing_rad : (n,) float
+        Predicted bearing of each (landmark, keyframe), robot frame, in [-pi, pi).
+    cov_rad2 : (n, n) float
+        Joint first-order covariance of the predictions (landmark and keyframe pose
+        uncertainty; the detections' own noise is not in it), rad^2.
+    landmark : (n,) int
+        The landmark of each prediction.
+    keyframe : (n,) int
+        The keyframe of each prediction.
+    """
+
+    bearing_rad: NDArray[np.float64]
+    cov_rad2: NDArray[np.float64]
+    landmark: NDArray[np.int64]
+    keyframe: NDArray[np.int64]
+
+
+def joint_predictions(
+    points_fl: NDArray[np.float64],
+    covs_fl: NDArray[np.float64],
+    origins_fl: NDArray[np.float64],
+    headings_rad: NDArray[np.float64],
+    pose_cov: NDArray[np.float64],
+    visible: NDArray[np.bool_] | None = None,
+) -> JointPredictions:
+    """Bearings of ``L`` landmarks from ``K`` keyframes and their joint covariance, first order.
+
+    Parameters
+    ----------
+    points_fl : (L, 2) float
+        Landmark estimates, FL (independent of each other and of the poses).
+    covs_fl : (L, 2, 2) float
+        Their covariances, FL^2.
+    origins_fl : (K, 2) float
+        Keyframe positions, FL.
+    headings_rad : (K,) float
+        Keyframe headings, FL (bearings are relative to them).
+    pose_cov : (3K, 3K) float
+        Covariance of the keyframes' ``(x, y, heading)`` stacked keyframe by keyframe, FL
+        frame (FL^2, FL rad, rad^2).
+    visible : (K, L) bool or None
+        Which (keyframe, landmark) to predict (None: all).
+
+    Returns
+    -------
+    JointPredictions
+        One prediction per visible (keyframe, landmark), keyframe by keyframe.
+    """
+    pts = np.asarray(points_fl, np.float64).reshape(-1, 2)
+    covs = np.asarray(covs_fl, np.float64).reshape(-1, 2, 2)
+    org = np.asarray(origins_fl, np.float64).reshape(-1, 2)
+    head = np.asarray(headings_rad, np.float64).reshape(-1)
+    n_l, n_k = len(pts), len(org)
+    mask = np.ones((n_k, n_l), np.bool_) if visible is None else np.asarray(visible, np.bool_)
+    kf, lm = np.nonzero(mask)
+    d = pts[lm] - org[kf]
+    r2 = np.maximum((d**2).sum(axis=1), 1e-12)
+    j_pt = np.column_stack((-d[:, 1], d[:, 0])) / r2[:, None]  # d bearing / d point, (n, 2)
+    # Jacobian with respect to every landmark (2L) then every pose (3K)
+    n = len(kf)
+    jac = np.zeros((n, 2 * n_l + 3 * n_k))
+    rows = np.arange(n)
+    jac[rows, 2 * lm] = j_pt[:, 0]
+    jac[rows, 2 * lm + 1] = j_pt[:, 1]
+    jac[rows, 2 * n_l + 3 * kf] = -j_pt[:, 0]
+    jac[rows, 2 * n_l + 3 * kf + 1] = -j_pt[:, 1]
+    jac[rows, 2 * n_l + 3 * kf + 2] = -1.0
+    state = np.zeros((2 * n_l + 3 * n_k, 2 * n_l + 3 * n_k))
+    for i in range(n_l):
+        state[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = covs[i]
+    state[2 * n_l :, 2 * n_l :] = np.asarray(pose_cov, np.float64)
+    cov = jac @ state @ jac.T
+    bearing = wrap_rad(np.arctan2(d[:, 1], d[:, 0]) - head[kf])
+    return JointPredictions(
+        np.asarray(bearing, np.float64),
+        0.5 * (cov + cov.T),
+        lm.astype(np.int64),
+        kf.astype(np.int64),
+    )
+
+
+@dataclass(frozen=True)
+class JointAssignment:
+    """The answer of :func:`jcbb`.
+
+    Attributes
+    ----------
+    pairs : list of (int, int)
+        ``(prediction, detection)`` pairs of the largest jointly compatible hypothesis, sorted.
+    d2 : float
+        Its joint squared Mahalanobis distance (0 for no pair).
+    ambiguous : list of (int, int)
+        Pairs of ``pairs`` that an equally large jointly compatible hypothesis without them
+        matches within ``margin`` (the data do not decide them).
+    complete : bool
+        False when the search stopped at its node budget (``pairs`` is then the best found).
+    """
+
+    pairs: list[tuple[int, int]] = field(default_factory=list)
+    d2: float = 0.0
+    ambiguous: list[tuple[int, int]] = field(default_factory=list)
+    complete: bool = True
+
+
+class _Search:
+    """Branch and bound over detections in order; each detection takes a free prediction of
+    its keyframe or none. ``D2`` is grown one pair at a time through the Cholesky factor of
+    ``S_H`` (each step adds one row). A partial hypothesis is cut when its ``D2`` exceeds the
+    gate of the largest hypothesis it can still grow into (the gate widens with each pair, so
+    a hypothesis may pass its gate though a part of it does not pass the part's)."""
+
+    def __init__(
+        self,
+        nu: NDArray[np.float64],
+        s: NDArray[np.float64],
+        cands: list[list[int]],
+        gates: list[float],
+        max_nodes: int,
+    ) -> None:
+        self.nu, self.s, self.cands, self.gates = nu, s, cands, gates
+        self.max_nodes = max_nodes
+        self.nodes = 0
+        m = len(cands)
+        # most pairs the detections from j on can still add
+        self.left = [sum(1 for c in cands[j:] if c) for j in range(m + 1)]
+        self.best: tuple[int, float, list[tuple[int, int]]] = (0, 0.0, [])
+        self.found = False
+
+    def run(
+        self, floor: tuple[int, float], forbid: tuple[int, int] | None, first: bool
+    ) -> tuple[int, float, list[tuple[int, int]]] | None:
+        """Best hypothesis beating ``floor`` (more pairs, or as many at a smaller ``D2``),
+        ``forbid`` never used; with ``first`` the first one found. None: there is none."""
+        self.best = (floor[0], floor[1], [])
+        self.found, self.forbid, self.first = False, forbid, first
+        k = len(self.nu)
+        self._chol = np.zeros((k, k))
+        self._y = np.zeros(k)
+        self._used = np.zeros(self.s.shape[0], np.bool_)
+        self._rows: list[int] = []
+        self._pairs: list[tuple[int, int]] = []
+        self._walk(0, 0.0)
+        return self.best if self.found else None
+
+    def _better(self, n: int, d2: float) -> bool:
+        return n > self.best[0] or (n == self.best[0] and d2 < self.best[1])
+
+    def _walk(self, j: int, d2: float) -> None:
+        self.nodes += 1
+        if (self.found and self.first) or self.nodes > self.max_nodes:
+            return
+        n = len(self._pairs)
+        if not self._better(n + self.left[j], d2):
+            return  # cannot beat the best: D2 only grows
+        if j == len(self.cands):
+            if d2 <= self.gates[n]:
+                self.best, self.found = (n, d2, list(self._pairs)), True
+            return
+        # the largest hypothesis this branch can still reach has the widest gate
+        reach = self.gates[min(n + 1 + self.left[j + 1], len(self.gates) - 1)]
+        for i in self.cands[j]:
+            if self._used[i] or (i, j) == self.forbid:
+                continue
+            step = self._extend(i, j, n)
+            if step is None or d2 + step > reach:
+                continue
+            self._used[i] = True
+            self._pairs.append((i, j))
+            self._rows.append(i)
+            self._walk(j + 1, d2 + step)
+            self._rows.pop()
+            self._pairs.pop()
+            self._used[i] = False
+        self._walk(j + 1, d2)  # the detection left unpaired
+
+    def _extend(self, i: int, j: int, n: int) -> float | None:
+        """Add prediction ``i`` with detection ``j`` as row ``n`` of the Cholesky factor; the
+        increase of ``D2`` (None: ``S_H`` would not be positive definite)."""
+        chol, rows = self._chol, self._rows
+        # the new row of the lower triangular factor: chol row = S[i, rows]
+        row = np.linalg.solve(chol[:n, :n], self.s[i, rows]) if n else np.zeros(0)
+        rest = float(self.s[i, i] - row @ row)
+        if rest <= 1e-18:
+            return None
+        diag = math.sqrt(rest)
+        y = (float(self.nu[i, j]) - float(row @ self._y[:n])) / diag
+        chol[n, :n] = row
+        chol[n, n] = diag
+        chol[n, n + 1 :] = 0.0
+        self._y[n] = y
+        return y * y
+
+
+def jcbb(
+    pred_rad: NDArray[np.float64],
+    cov_rad2: NDArray[np.float64],
+    pred_keyframe: NDArray[np.int64],
+    det_rad: NDArray[np.float64],
+    det_keyframe: NDArray[np.int64],
+    noise_var_rad2: float,
+    *,
+    p_gate: float = GATE_P,
+    margin: float = MARGIN_CHI2,
+    max_nodes: int = MAX_NODES,
+) -> JointAssignment:
+    """The largest jointly compatible assignment of detections to predictions.
+
+    Parameters
+    ----------
+    pred_rad : (n,) float
+        Predicted bearings, robot frame, rad.
+    cov_rad2 : (n, n) float
+        Their joint covariance, rad^2 (:func:`joint_predictions`).
+    pred_keyframe : (n,) int
+        The keyframe of each prediction.
+    det_rad : (m,) float
+        Detected bearings, robot frame, rad.
+    det_keyframe : (m,) int
+        The keyframe of each detection (a detection pairs only with its keyframe's
+        predictions).
+    noise_var_rad2 : float
+        Variance of a detection's bearing noise, rad^2 (independent between detections).
+    p_gate : float
+        Probability inside each pair's gate (1 dof) and the joint gate (``|H|`` dof).
+    margin : float
+        A pair is ambiguous when an assignment as large without it has ``D2`` within this.
+    max_nodes : int
+        Search budget (nodes) of each search.
+
+    Returns
+    -------
+    JointAssignment
+        Pairs ``(prediction, detection)``, their ``D2``, the ambiguous pairs.
+    """
+    pred = np.asarray(pred_rad, np.float64).reshape(-1)
+    det = np.asarray(det_rad, np.float64).reshape(-1)
+    pk = np.asarray(pred_keyframe, np.int64).reshape(-1)
+    dk = np.asarray(det_keyframe, np.int64).reshape(-1)
+    s = np.asarray(cov_rad2, np.float64).reshape(len(pred), len(pred)) + noise_var_rad2 * np.eye(
+        len(pred)
+    )
+    nu = np.asarray(wrap_rad(det[None, :] - pred[:, None]), np.float64).reshape(len(pred), len(det))
+    var = np.maximum(np.diag(s), 1e-18)
+    d2_one = nu**2 / var[:, None]
+    own = (pk[:, None] == dk[None, :]) & (d2_one <= chi2_quantile(1, p_gate))
+    # each detection's candidates, nearest first; detections with fewest candidates first
+    cands = [[int(i) for i in np.argsort(d2_one[:, j]) if own[i, j]] for j in range(len(det))]
+    order = sorted(range(len(det)), key=lambda j: (len(cands[j]) == 0, len(cands[j]), j))
+    most = min(len(pred), len(det))
+    gates = [0.0] + [chi2_quantile(k, p_gate) for k in range(1, most + 1)]
+    search = _Search(nu[:, order], s, [cands[j] for j in order], gates, max_nodes)
+    best = search.run((0, math.inf), None, first=False)
+    complete = search.nodes <= max_nodes
+    if best is None:
+        return JointAssignment(complete=complete)
+    n, d2, pairs = best
+    ambiguous = []
+    for i, jj in pairs:
+        search.nodes = 0
+        rival = search.run((n, d2 + margin), (i, jj), first=True)
+        complete = complete and search.nodes <= max_nodes
+        if rival is not None:
+            ambiguous.append((i, order[jj]))
+    return JointAssignment(
+        sorted((i, order[jj]) for i, jj in pairs), d2, sorted(ambiguous), complete
+    )
