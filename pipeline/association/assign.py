@@ -112,7 +112,7 @@ def _groups(plausible: NDArray[np.bool_]) -> list[tuple[list[int], list[int]]]:
     return out
 
 
-def _in_front(range_fl: NDArray[np.float64], range_std_fl: NDArray[np.float64]) -> int | None:
+def in_front(range_fl: NDArray[np.float64], range_std_fl: NDArray[np.float64]) -> int | None:
     """Index of the landmark clearly nearer than every other one (None: none is)."""
     if range_fl.size < 2 or not np.all(np.isfinite(range_fl)):
         return None
@@ -177,7 +177,7 @@ def assign(
                 if _solve(alt, gate)[0] - best >= margin:
                     sure.append((i, j))
             if not sure and len(dets) == 1 and range_fl is not None and range_std_fl is not None:
-                front = _in_front(np.asarray(range_fl)[lms], np.asarray(range_std_fl)[lms])
+                front = in_front(np.asarray(range_fl)[lms], np.asarray(range_std_fl)[lms])
                 if front is not None and _in_line(pred[lms], front, in_line_rad):
                     out.pairs.append((lms[front], dets[0]))
                     out.hidden.extend((k, lms[front]) for k in lms if k != lms[front])

@@ -24,12 +24,14 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from pipeline.association.assign import Assignment, in_front
 
 #: Probability mass inside the joint gate (and inside each pair's own gate).
 GATE_P = 0.999
@@ -133,6 +135,15 @@ def joint_predictions(
         lm.astype(np.int64),
         kf.astype(np.int64),
     )
+
+
+def own_to_fl(cov_own: NDArray[np.float64], heading_rad: float) -> NDArray[np.float64]:
+    """A keyframe pose covariance (3, 3) of ``(x, y, heading)`` in the keyframe's own frame
+    (x ahead, y to the left) expressed in FL (the position part turned by the heading)."""
+    c, s = math.cos(heading_rad), math.sin(heading_rad)
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    out: NDArray[np.float64] = turn @ np.asarray(cov_own, np.float64) @ turn.T
+    return out
 
 
 @dataclass(frozen=True)
@@ -320,3 +331,132 @@ def jcbb(
     return JointAssignment(
         sorted((i, order[jj]) for i, jj in pairs), d2, sorted(ambiguous), complete
     )
+
+
+def assign_jointly(
+    points_fl: NDArray[np.float64],
+    covs_fl: NDArray[np.float64],
+    visible: NDArray[np.bool_],
+    origins_fl: NDArray[np.float64],
+    headings_rad: NDArray[np.float64],
+    pose_cov: NDArray[np.float64],
+    det_rad: Sequence[NDArray[np.float64]],
+    noise_var_rad2: float,
+    *,
+    margin: float = MARGIN_CHI2,
+    range_fl: NDArray[np.float64] | None = None,
+    range_std_fl: NDArray[np.float64] | None = None,
+    in_line_rad: float = 0.0,
+) -> list[Assignment]:
+    """Assign the detections of one class at ``K`` keyframes to its ``L`` landmarks at once
+    (:func:`jcbb`), as one :class:`~pipeline.association.assign.Assignment` per keyframe.
+
+    Parameters
+    ----------
+    points_fl, covs_fl : (L, 2), (L, 2, 2) float
+        The landmarks (FL, FL^2).
+    visible : (K, L) bool
+        Which landmark to predict at which keyframe (the others are left out of the answer).
+    origins_fl, headings_rad, pose_cov : (K, 2), (K,), (3K, 3K) float
+        The keyframes and their joint pose covariance (:func:`joint_predictions`).
+    det_rad : K arrays (m_k,) float
+        Each keyframe's detections, rad.
+    noise_var_rad2 : float
+        A detection's bearing noise variance, rad^2.
+    margin : float
+        Ambiguity margin (:func:`jcbb`); ambiguous pairs are contested, never used.
+    range_fl, range_std_fl : (K, L) float or None
+        Predicted distances and their stds (FL; NaN: not trusted to hide another). When an
+        ambiguous detection is the only one the landmarks whose gates hold it gate, and they
+        are predicted in line (within ``in_line_rad``) with one clearly in front
+        (:data:`~pipeline.association.assign.NEAR_RATIO`,
+        :data:`~pipeline.association.assign.NEAR_SIGMAS`), that one takes it and hides the
+        others.
+
+    Returns
+    -------
+    list of Assignment
+        Per keyframe; landmark indices into ``points_fl``; ``d2`` (L, m_k) each pair's own
+        squared Mahalanobis distance (inf where not predicted).
+    """
+    vis = np.asarray(visible, np.bool_)
+    jp = joint_predictions(points_fl, covs_fl, origins_fl, headings_rad, pose_cov, vis)
+    dets = [np.asarray(d, np.float64).reshape(-1) for d in det_rad]
+    det_all = np.concatenate([*dets, np.zeros(0)])
+    det_k = np.concatenate(
+        [np.full(len(d), k, np.int64) for k, d in enumerate(dets)] + [np.zeros(0, np.int64)]
+    )
+    start = np.concatenate(([0], np.cumsum([len(d) for d in dets])))
+    got = jcbb(
+        jp.bearing_rad, jp.cov_rad2, jp.keyframe, det_all, det_k, noise_var_rad2, margin=margin
+    )
+    var = np.diag(jp.cov_rad2) + noise_var_rad2
+    nu = wrap_rad(det_all[None, :] - jp.bearing_rad[:, None])
+    d2_all = np.asarray(nu, np.float64).reshape(len(var), -1) ** 2 / np.maximum(var, 1e-18)[:, None]
+    gate = chi2_quantile(1)
+    ambiguous = set(got.ambiguous)
+    out = []
+    for k, det in enumerate(dets):
+        rows = np.flatnonzero(jp.keyframe == k)
+        cols = np.arange(start[k], start[k + 1])
+        lm = jp.landmark[rows]
+        d2 = np.full((vis.shape[1], len(det)), np.inf)
+        d2[lm] = d2_all[np.ix_(rows, cols)]
+        pred = np.full(vis.shape[1], np.nan)
+        pred[lm] = jp.bearing_rad[rows]
+        ranges = None
+        if range_fl is not None and range_std_fl is not None:
+            ranges = (np.asarray(range_fl)[k], np.asarray(range_std_fl)[k])
+        a = Assignment(d2=d2)
+        sure = [(p, q) for p, q in got.pairs if jp.keyframe[p] == k and (p, q) not in ambiguous]
+        unsure = [(p, q) for p, q in got.pairs if jp.keyframe[p] == k and (p, q) in ambiguous]
+        a.pairs.extend((int(jp.landmark[p]), int(q - start[k])) for p, q in sure)
+        taken = {i for i, _ in a.pairs}
+        held = {j for _, j in a.pairs}
+        contested_d: set[int] = set()
+        contested_l: set[int] = set()
+        for _, q in unsure:
+            j = int(q - start[k])
+            lms = [int(i) for i in lm[d2[lm, j] <= gate] if int(i) not in taken]
+            front = _front_of(lms, j, d2 <= gate, pred, ranges, in_line_rad)
+            if front is not None:
+                a.pairs.append((front, j))
+                a.hidden.extend((i, front) for i in lms if i != front)
+                taken.update(lms)
+                held.add(j)
+                continue
+            contested_d.add(j)
+            contested_l.update(lms)
+        contested_l -= taken
+        a.contested_landmarks.extend(sorted(contested_l))
+        a.contested_detections.extend(sorted(contested_d - held))
+        a.missing.extend(int(i) for i in lm if int(i) not in taken | contested_l)
+        a.unexplained.extend(j for j in range(len(det)) if j not in held | contested_d)
+        a.pairs.sort()
+        a.hidden.sort()
+        out.append(a)
+    return out
+
+
+def _front_of(
+    lms: list[int],
+    j: int,
+    gated: NDArray[np.bool_],
+    pred_rad: NDArray[np.float64],
+    ranges: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    in_line_rad: float,
+) -> int | None:
+    """Of landmarks ``lms`` whose gates hold detection ``j`` (``gated`` (L, m): whose gate
+    holds which detection), the one clearly in front when they gate no other detection and
+    are predicted (``pred_rad`` (L,)) in line; None: none is, or no distances (``ranges``:
+    (L,) distances and stds, FL)."""
+    if ranges is None or len(lms) < 2:
+        return None
+    if np.any(np.delete(gated[lms], j, axis=1)):
+        return None  # they gate another detection too: not one blob
+    ahead = in_front(ranges[0][lms], ranges[1][lms])
+    if ahead is None:
+        return None
+    if float(np.abs(wrap_rad(pred_rad[lms] - pred_rad[lms[ahead]])).max()) > in_line_rad:
+        return None
+    return lms[ahead]

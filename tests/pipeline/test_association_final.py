@@ -50,18 +50,23 @@ def _known(points: np.ndarray, std_fl: float) -> dict[str, list[tuple[str, Landm
     return {"blue": [(f"blue#{k + 1}", LandmarkEstimate(p, cov)) for k, p in enumerate(points)]}
 
 
-def test_landmarks_degrees_apart_are_told_apart_by_a_sharp_keyframe_only() -> None:
+def test_landmarks_degrees_apart_are_told_apart_unless_their_places_are_loose() -> None:
     # two landmarks 2 m away, 3 degrees apart as seen from the keyframe; blobs 0.3 degrees off
     pts = 2.0 * np.array([[math.cos(a), math.sin(a)] for a in (0.0, 3 * DEG)])
     det = {(0, 0): {"blue": [3.3 * DEG, 0.3 * DEG]}}
     sharp = KeyframePose(np.zeros(2), 0.0, np.diag([1e-6, 1e-6, (0.3 * DEG) ** 2]))
     loose = KeyframePose(np.zeros(2), 0.0, np.diag([1e-6, 1e-6, (4.0 * DEG) ** 2]))
-    known = _known(pts, 0.005)
-    out = associate_final(det, {(0, 0): sharp}, known, noise_rad=1.0 * DEG, eps_rad=3.0 * DEG)
-    assert [(d.name, d.status) for d in out] == [("blue#2", "named"), ("blue#1", "named")]
-    # the same blobs from a keyframe whose heading is known to 4 degrees: the swap costs about
-    # 1 chi-square more, within the margin (FINAL_MARGIN_CHI2)
-    out = associate_final(det, {(0, 0): loose}, known, noise_rad=1.0 * DEG, eps_rad=3.0 * DEG)
+    for pose in (sharp, loose):
+        # a heading known to 4 degrees only shifts both blobs alike: the swap's innovations
+        # (3.3, -2.7 deg) differ by 6 deg where the blobs' own noise (1 deg each) and the
+        # points' (0.14 deg) allow ~1.4: about 17 chi-square more than the right pairing
+        out = associate_final(
+            det, {(0, 0): pose}, _known(pts, 0.005), noise_rad=DEG, eps_rad=3 * DEG
+        )
+        assert [(d.name, d.status) for d in out] == [("blue#2", "named"), ("blue#1", "named")]
+    # points known to 8 cm (2.3 deg at 2 m) each: the swap is within a few chi-square
+    # (6^2 / (2 (1 + 2.3^2)) = 2.9 more, under FINAL_MARGIN_CHI2)
+    out = associate_final(det, {(0, 0): sharp}, _known(pts, 0.08), noise_rad=DEG, eps_rad=3 * DEG)
     assert [(d.name, d.status) for d in out] == [(None, "contested"), (None, "contested")]
 
 
@@ -120,7 +125,7 @@ def _random_keyframes(
     return out
 
 
-def test_random_arenas_are_associated_right_and_more_with_sharp_keyframes() -> None:
+def test_random_arenas_are_associated_right_with_sharp_or_loose_headings() -> None:
     keyframes = _random_keyframes(np.random.default_rng(11), 50)
     named = {}
     for heading_std in (0.5 * DEG, 2.0 * DEG):  # as the keyframe's covariance says; looser
@@ -139,12 +144,12 @@ def test_random_arenas_are_associated_right_and_more_with_sharp_keyframes() -> N
                 n += d.name is not None
                 right += d.name == f"blue#{true + 1}"
         assert total > 2500
-        assert right >= 0.995 * n  # measured: 99.8 and 99.9 %
+        assert right >= 0.995 * n  # measured: 99.6 and 99.6 %
         named[heading_std] = n / total
-    # measured: 91 % named with the keyframe's own covariance, 83 % with the looser one (the
-    # rest: landmarks a few degrees apart)
-    assert named[0.5 * DEG] >= 0.85
-    assert named[0.5 * DEG] >= named[2.0 * DEG] + 0.05
+    # measured: 92.5 % named with the keyframe's own covariance, 92 % with the looser one (the
+    # rest: landmarks a few degrees apart): a looser heading shifts every prediction of the
+    # keyframe alike, which the joint assignment does not pay for (each gate alone: 83 %)
+    assert named[0.5 * DEG] >= 0.85 and named[2.0 * DEG] >= 0.85
 
 
 def test_unexplained_detections_are_reported_whether_or_not_every_name_is_given() -> None:
