@@ -293,6 +293,9 @@ class AssociationRecord:
     named_at_end : dict name -> str
         Free names given once the log was processed to landmarks the final map's unexplained
         detections point at, with why (``estimates`` is then the map with them).
+    weak : dict name -> str
+        Names the final association supports weakly, with why
+        (:func:`pipeline.association.final.weak_names`).
     """
 
     timestamp_ns: int
@@ -303,6 +306,7 @@ class AssociationRecord:
     estimates: Mapping[str, EstimateRecord] | None = None
     placed_by_matching: Sequence[int] = ()
     named_at_end: Mapping[str, str] = field(default_factory=dict)
+    weak: Mapping[str, str] = field(default_factory=dict)
 
     def counts(self) -> dict[str, dict[str, int]]:
         """Per class: ``detections`` and how many of them are in each status (``named``,

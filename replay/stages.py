@@ -247,12 +247,15 @@ class Runner:
             estimates,
             final.placed_by_matching,
             final.named_at_end,
+            final.weak,
         )
         logger.info("%s: %s", self.log.name, record.text())
         for name, why in record.retracted.items():
             logger.warning("%s: with the final map, %s %s", self.log.name, name, why)
         for name, why in record.named_at_end.items():
             logger.info("%s: with the final map, %s %s", self.log.name, name, why)
+        for name, why in record.weak.items():
+            logger.warning("%s: with the final map, %s is weak: %s", self.log.name, name, why)
         for label, text in record.reports.items():
             logger.warning("%s: %s with the final map: %s", self.log.name, label, text)
         for sink in self.sinks:

@@ -2,7 +2,8 @@
 
 A map is not trustworthy when its own evidence says so: a class of look-alike landmarks has
 detections that no name explains with the final map (a landmark missing, or a name where rays
-of several landmarks meet), names are doubtful or unconfirmed (flagged one by one), or the
+of several landmarks meet), names are doubtful, unconfirmed, weak with the final map, or placed
+only loosely (their 99 % region reaching farther than :data:`LOOSE_M`; flagged one by one), or the
 bearings of several movements do not fit the map (they were skipped as not fitting it, or the
 map diverged with them), or fewer than half of the movements are in the map, or the map has
 collapsed (landmarks where the robot stood). The verdict is a
@@ -15,6 +16,11 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
+from pipeline.estimate import chi2_2dof_quantile
+from pipeline.geometry import widest_std
+
 #: This many movements skipped because their bearings did not fit the map make it doubtful.
 MISFIT_MOVEMENTS = 2
 #: Statuses of movements skipped because their bearings did not fit the map.
@@ -24,6 +30,10 @@ MISFIT_STATUSES = ("does not fit the map", "the map diverged")
 #: The robot's body keeps it several centimetres from any landmark, over 1% of any |L1 L2|
 #: of a few metres.
 COLLAPSE_FL = 0.005
+#: A name of a shared class whose 99 % region (the map's covariance) reaches farther than this
+#: from its point, along its widest axis, is flagged by name: the map cannot tell it within
+#: this distance, and a name that far off is wrong for a user.
+LOOSE_M = 0.10
 
 
 def trust_reasons(doc: dict[str, Any]) -> list[str]:
@@ -51,7 +61,32 @@ def trust_reasons(doc: dict[str, Any]) -> list[str]:
         names = assoc.get(key) or {}
         if names:
             reasons.append(f"{key} name(s) {', '.join(sorted(names))}")
+    weak = sorted(n for c in assoc.get("final_map", {}).values() for n in c.get("weak", {}))
+    if weak:
+        reasons.append(f"weak name(s) {', '.join(weak)} (too few detections with the final map)")
+    loose = _loose(doc)
+    if loose:
+        reasons.append(
+            f"name(s) {', '.join(loose)} placed only to within {100 * LOOSE_M:.0f} cm or worse"
+        )
     return reasons
+
+
+def _loose(doc: dict[str, Any]) -> list[str]:
+    """Names of shared classes (``label#k``) whose 99 % region reaches farther than
+    :data:`LOOSE_M` from their point (none when the map's unit is unknown)."""
+    unit_m = doc.get("map_unit_m")
+    if not unit_m:
+        return []
+    out = []
+    for name, est in doc.get("landmarks", {}).items():
+        cov = est.get("cov")
+        if "#" not in name or cov is None:
+            continue
+        reach = math.sqrt(chi2_2dof_quantile(0.99)) * widest_std(np.asarray(cov, np.float64))
+        if reach * unit_m > LOOSE_M:
+            out.append(name)
+    return sorted(out, key=lambda n: (n.rpartition("#")[0], int(n.rpartition("#")[2])))
 
 
 def _collapsed(doc: dict[str, Any]) -> list[str]:

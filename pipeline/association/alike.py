@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from data_schemas.session import Session, shared_classes
-from pipeline.association.final import FinalDetection
+from pipeline.association.final import FinalDetection, weak_names
 from pipeline.association.result import MovementAssociation
 from pipeline.association.tracker import Associator
 from pipeline.bearings import Detection, camera_view_rad
@@ -147,7 +147,16 @@ class AlikeLandmarks:
             retracted.update(repair.retracted)
             named_at_end.update(repair.named_at_end)
             detections, reports, poses, placed = associate()
-        return FinalAssociation(detections, reports, retracted, placed, named_at_end)
+        noise = estimator.noise
+        weak = weak_names(
+            detections,
+            poses,
+            estimator.estimates,
+            [n for names in self.associator.named.values() for n in names],
+            noise_rad=self.associator.model.sigma_rad if noise is None else noise.sigma_rad,
+            eps_rad=self.associator.model.eps_rad,
+        )
+        return FinalAssociation(detections, reports, retracted, placed, named_at_end, weak)
 
 
 @dataclass(frozen=True)
@@ -155,11 +164,14 @@ class FinalAssociation:
     """What :meth:`AlikeLandmarks.final` found: every keyframe detection with the final map,
     the reports per class, the names retracted and given anew once the log was processed
     (name -> why; the map changed only then), the movements the map left out that were
-    placed by matching for this association, and the free names given then to landmarks the
-    unexplained detections point at (name -> why; the map changed then too)."""
+    placed by matching for this association, the free names given then to landmarks the
+    unexplained detections point at (name -> why; the map changed then too), and the names
+    the final association supports weakly (name -> why;
+    :func:`pipeline.association.final.weak_names`)."""
 
     detections: list[FinalDetection]
     reports: dict[str, str]
     retracted: dict[str, str] = field(default_factory=dict)
     placed_by_matching: list[int] = field(default_factory=list)
     named_at_end: dict[str, str] = field(default_factory=dict)
+    weak: dict[str, str] = field(default_factory=dict)

@@ -300,6 +300,69 @@ def missing_reports(
     return out
 
 
+#: A name the final association gives a detection at fewer than this share of the keyframes
+#: where the final map predicts it sharply enough to gate is weak (flagged by name): its point
+#: may stand where rays of several landmarks meet. Measured on 24 simulated runs of 12 and 16
+#: identical landmarks: 16 of 21 names more than 10 cm off are below it, 24 of 214 within
+#: 10 cm.
+WEAK_SHARE = 0.75
+
+
+def given_share(
+    name: str,
+    estimate: LandmarkEstimate,
+    detections: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    *,
+    noise_rad: float,
+    eps_rad: float,
+) -> tuple[int, int]:
+    """At how many keyframes of ``poses`` the final map predicts ``name`` (its ``estimate``,
+    FL) sharply enough to gate (std at most :data:`MAX_PRED_STD_EPS` eps, bearing noise
+    ``noise_rad``), and how many of ``detections`` were given ``name``: (given, predicted)."""
+    predicted = 0
+    for p in poses.values():
+        _, std = predict_bearings(
+            p.origin_fl,
+            p.heading_rad,
+            estimate.mean_fl[None, :],
+            estimate.cov_fl[None, :, :],
+            bearing_var_rad=noise_rad**2,
+            pose_cov=p.cov,
+        )
+        predicted += bool(std[0] <= MAX_PRED_STD_EPS * eps_rad)
+    return sum(d.name == name for d in detections), predicted
+
+
+def weak_names(
+    detections: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    mapped: Mapping[str, LandmarkEstimate],
+    names: Collection[str],
+    *,
+    noise_rad: float,
+    eps_rad: float,
+) -> dict[str, str]:
+    """The ``names`` (in the final map ``mapped``) the final association gives a detection at
+    fewer than :data:`WEAK_SHARE` of the keyframes where the map predicts them
+    (:func:`given_share`), with why."""
+    out = {}
+    for name in sorted(names):
+        e = mapped.get(name)
+        if e is None:
+            continue
+        given, predicted = given_share(
+            name, e, detections, poses, noise_rad=noise_rad, eps_rad=eps_rad
+        )
+        if predicted and given < WEAK_SHARE * predicted:
+            out[name] = (
+                f"given a detection at {given} of {predicted} keyframes where the final map "
+                f"predicts it ({100 * given / predicted:.0f} %): it may stand where rays of "
+                "several landmarks meet"
+            )
+    return out
+
+
 def unexplained_rays(
     detections: Sequence[FinalDetection],
     label: str,

@@ -24,8 +24,9 @@ detections associated again with the final map once the log is processed (``name
 ``contested``, ``unexplained``, ``not placed``, ``per_name``, a ``warning`` when the final
 map leaves several of its detections unexplained, every name of the class given or not,
 ``retracted``: names taken back then and given to the landmark those detections point at,
-and ``named_at_end``: free names given then to landmarks unexplained detections point at; the
-map after either is the document's ``landmarks``), ``placed_by_matching`` (movements the map left
+``named_at_end``: free names given then to landmarks unexplained detections point at; the
+map after either is the document's ``landmarks``; and ``weak``: names the final association
+gives a detection at too few of the keyframes where the final map predicts them, name -> why), ``placed_by_matching`` (movements the map left
 out, placed for that association by matching their detections with the final map) and, for
 simulated logs, ``matched_truth``
 (each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
@@ -442,6 +443,7 @@ class SummarySink:
             for key, given in (
                 ("retracted", self._final.retracted),
                 ("named_at_end", self._final.named_at_end),
+                ("weak", self._final.weak),
             ):
                 for name, why in given.items():
                     shared_label = class_of_name(name)
