@@ -364,7 +364,9 @@ def assign_jointly(
     noise_var_rad2 : float
         A detection's bearing noise variance, rad^2.
     margin : float
-        Ambiguity margin (:func:`jcbb`); ambiguous pairs are contested, never used.
+        Ambiguity margin (:func:`jcbb`); ambiguous pairs are contested, never used, with the
+        landmarks whose gates hold their detections and the unpaired detections those gates
+        hold.
     range_fl, range_std_fl : (K, L) float or None
         Predicted distances and their stds (FL; NaN: not trusted to hide another). When an
         ambiguous detection is the only one the landmarks whose gates hold it gate, and they
@@ -428,6 +430,9 @@ def assign_jointly(
             contested_d.add(j)
             contested_l.update(lms)
         contested_l -= taken
+        # the rivals' detections: unpaired ones a contested landmark's gate holds
+        for i in contested_l:
+            contested_d.update(int(j) for j in np.flatnonzero(d2[i] <= gate) if j not in held)
         a.contested_landmarks.extend(sorted(contested_l))
         a.contested_detections.extend(sorted(contested_d - held))
         a.missing.extend(int(i) for i in lm if int(i) not in taken | contested_l)

@@ -26,10 +26,10 @@ map leaves several of its detections unexplained, every name of the class given 
 ``retracted``: names taken back then and given to the landmark those detections point at,
 ``named_at_end``: free names given then to landmarks unexplained detections point at; the
 map after either is the document's ``landmarks``; and ``weak``: names the final association
-gives a detection at too few of the keyframes where the final map predicts them, name -> why), ``placed_by_matching`` (movements the map left
-out, placed for that association by matching their detections with the final map) and, for
-simulated logs, ``matched_truth``
-(each ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
+gives a detection at too few of the keyframes where the final map predicts them, name -> why),
+``placed_by_matching`` (movements the map left out, placed for that association by matching
+their detections with the final map) and, for simulated logs, ``matched_truth`` (each
+``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
 measured against it). ``trust`` says whether the map is ``trustworthy`` and, when not, the
 ``reasons`` (:mod:`replay.trust`); with ``--from``/``--to`` the document ends with the
 ``window`` processed.

@@ -12,9 +12,11 @@ from pipeline.association import Associator
 from pipeline.association.final import (
     MISSING_UNEXPLAINED,
     FinalDetection,
+    Status,
     associate_final,
     meeting_point,
     missing_reports,
+    weak_names,
 )
 from pipeline.association.hypotheses import Ray, fit
 from pipeline.association.predict import predict_bearings
@@ -467,3 +469,24 @@ def test_the_meeting_point_of_many_rays_is_found_among_a_share_of_their_crossing
     assert met is not None
     assert np.hypot(*(met[0] - p)) < 0.02
     assert sum(r.movement < 30 and r.detection == 0 for r in met[1]) == 30
+
+
+def test_a_name_given_few_of_its_predicted_detections_is_weak() -> None:
+    e = LandmarkEstimate(np.array([1.0, 0.0]), 1e-4 * np.eye(2))
+    sharp = 1e-6 * np.eye(3)
+    poses = {(k, 0): KeyframePose(np.array([0.0, 0.1 * k]), 0.0, sharp) for k in range(8)}
+    # a keyframe whose heading is known to 10 degrees only: not a prediction sharp enough to
+    # gate (2 eps = 6 degrees), so not counted
+    poses[8, 0] = KeyframePose(np.zeros(2), 0.0, np.diag([1e-6, 1e-6, (10 * DEG) ** 2]))
+
+    def given(n: int) -> list[FinalDetection]:
+        return [
+            FinalDetection(k, 0, "blue", 0.0, "blue#1" if k < n else None, Status.NAMED)
+            for k in range(9)
+        ]
+
+    kw = {"noise_rad": DEG, "eps_rad": 3 * DEG}
+    # 6 of 8 = 75 %: enough; 5 of 8: weak; a name not in the map is not judged here
+    assert weak_names(given(6), poses, {"blue#1": e}, ["blue#1", "blue#2"], **kw) == {}
+    weak = weak_names(given(5), poses, {"blue#1": e}, ["blue#1", "blue#2"], **kw)
+    assert list(weak) == ["blue#1"] and weak["blue#1"].startswith("given a detection at 5 of 8")

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from pipeline.association import assign
-from pipeline.association.jcbb import jcbb, joint_predictions
+from pipeline.association.jcbb import assign_jointly, jcbb, joint_predictions
 
 DEG = math.pi / 180.0
 P = 0.999
@@ -246,3 +246,46 @@ def test_no_prediction_no_detection_and_no_candidate_give_empty_answers() -> Non
         1e-4,
     )
     assert other.pairs == []
+
+
+def test_one_keyframe_assignment_says_missing_unexplained_contested_and_hidden() -> None:
+    # from (0, 0), heading 0: landmarks at 40 deg (1.5, 0.5 and 0.9 FL away, in line), one at
+    # -60 deg (not seen) and one at 100 deg with two blobs 3 deg either side of it
+    deg = np.radians([40.0, 41.0, 39.5, -60.0, 100.0])
+    dist = np.array([1.5, 0.5, 0.9, 1.0, 1.0])
+    pts = dist[:, None] * np.column_stack((np.cos(deg), np.sin(deg)))
+    covs = np.array([1e-8 * np.eye(2)] * 5)
+    det = np.radians([40.6, 97.0, 103.0, -150.0])
+    pose_cov = np.diag([0.0, 0.0, (0.1 * DEG) ** 2])
+    std = np.full((1, 5), 0.01)
+    (a,) = assign_jointly(
+        pts,
+        covs,
+        np.ones((1, 5), bool),
+        np.zeros((1, 2)),
+        np.zeros(1),
+        pose_cov,
+        [det],
+        (2.0 * DEG) ** 2,
+        range_fl=dist[None, :],
+        range_std_fl=std,
+        in_line_rad=3.0 * DEG,
+    )
+    assert a.pairs == [(1, 0)] and a.hidden == [(0, 1), (2, 1)]
+    assert a.missing == [3] and a.unexplained == [3]
+    assert a.contested_landmarks == [4] and a.contested_detections == [1, 2]
+    # the landmark at -60 deg left out of the prediction (not visible there): neither missing
+    # nor anything else
+    (b,) = assign_jointly(
+        pts,
+        covs,
+        np.array([[True, True, True, False, True]]),
+        np.zeros((1, 2)),
+        np.zeros(1),
+        pose_cov,
+        [det],
+        (2.0 * DEG) ** 2,
+    )
+    assert b.missing == [] and 3 not in b.contested_landmarks
+    # without distances nothing hides: the in-line landmarks contest their blob
+    assert sorted(b.contested_landmarks) == [0, 1, 2, 4] and b.contested_detections == [0, 1, 2]

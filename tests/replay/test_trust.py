@@ -115,3 +115,32 @@ def test_the_result_line_says_what_the_summary_holds() -> None:
         "predicted, or bearings that scatter); the map is NOT trustworthy: doubtful name(s) "
         "blue#4; the map collapsed"
     )
+
+
+def test_weak_and_loosely_placed_names_are_flagged_by_name() -> None:
+    doc = _doc(["ok"] * 4)
+    doc["map_unit_m"] = 0.5  # 1 FL = 50 cm
+    # std 2 cm along the widest axis (0.04 FL): the 99 % region reaches 3.03 * 2 = 6.1 cm
+    # std 4 cm (0.08 FL): 12.1 cm, farther than 10 cm; the unit's own landmark L3 is not named
+    doc["landmarks"] = {
+        "L3": {"mean": [0.5, 0.5], "cov": [[0.0064, 0.0], [0.0, 0.0064]]},
+        "blue#2": {"mean": [0.2, 0.4], "cov": [[0.0016, 0.0], [0.0, 0.0001]]},
+        "blue#10": {"mean": [0.9, 0.1], "cov": [[0.0001, 0.0], [0.0, 0.0064]]},
+    }
+    doc["association"] = {
+        "named": {"blue": ["blue#2", "blue#3", "blue#10"]},
+        "catalog_count": {"blue": 12},
+        "movements_with_unresolved": [],
+        "final_map": {
+            "blue": {"detections": 80, "named": 70, "in line": 0, "weak": {"blue#3": "given"}}
+        },
+    }
+    assert trust_reasons(doc) == [
+        "weak name(s) blue#3 (too few detections with the final map)",
+        "name(s) blue#10 placed only to within 10 cm or worse",
+    ]
+    doc["trust"] = trust_entry(doc)
+    assert "NOT trustworthy: weak name(s) blue#3" in result_line(doc)
+    # without the map's unit, no distance can be judged
+    del doc["map_unit_m"]
+    assert trust_reasons(doc) == ["weak name(s) blue#3 (too few detections with the final map)"]
