@@ -429,6 +429,9 @@ def assign_jointly(
                 continue
             contested_d.add(j)
             contested_l.update(lms)
+        # a landmark left unpaired though its gate holds a detection was not missed: that
+        # detection went to another, or is contested
+        contested_l.update(int(i) for i in lm if np.any(d2[i] <= gate))
         contested_l -= taken
         # the rivals' detections: unpaired ones a contested landmark's gate holds
         for i in contested_l:
