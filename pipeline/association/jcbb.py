@@ -394,7 +394,10 @@ def assign_jointly(
     )
     var = np.diag(jp.cov_rad2) + noise_var_rad2
     nu = wrap_rad(det_all[None, :] - jp.bearing_rad[:, None])
-    d2_all = np.asarray(nu, np.float64).reshape(len(var), -1) ** 2 / np.maximum(var, 1e-18)[:, None]
+    d2_all = (
+        np.asarray(nu, np.float64).reshape(len(var), len(det_all)) ** 2
+        / np.maximum(var, 1e-18)[:, None]
+    )
     gate = chi2_quantile(1)
     ambiguous = set(got.ambiguous)
     out = []

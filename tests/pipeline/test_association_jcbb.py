@@ -289,3 +289,17 @@ def test_one_keyframe_assignment_says_missing_unexplained_contested_and_hidden()
     assert b.missing == [] and 3 not in b.contested_landmarks
     # without distances nothing hides: the in-line landmarks contest their blob
     assert sorted(b.contested_landmarks) == [0, 1, 2, 4] and b.contested_detections == [0, 1, 2]
+
+
+def test_detections_with_no_landmark_visible_are_all_unexplained() -> None:
+    (a,) = assign_jointly(
+        np.array([[1.0, 0.0]]),
+        np.array([1e-4 * np.eye(2)]),
+        np.zeros((1, 1), bool),
+        np.zeros((1, 2)),
+        np.zeros(1),
+        np.zeros((3, 3)),
+        [np.array([0.1, 0.2])],
+        1e-4,
+    )
+    assert a.pairs == [] and a.unexplained == [0, 1] and a.missing == []
