@@ -76,3 +76,48 @@ def coded_wide_reference(moves: int = 10) -> dict[str, Any]:
         f"coded_3x2 with L2 and L5 swapped (a 1.18 m reference baseline), {moves} movements"
     )
     return doc
+
+
+def alike_arena(n: int, camera: str, size_m: tuple[float, float], *, seed: int) -> dict[str, Any]:
+    """Scenario JSON: ``n`` identical blue landmarks drawn from ``seed`` at least 30 cm apart
+    (15 cm from the walls) in an arena of ``size_m`` (width, height), the reference pair 60 cm
+    apart at its middle, 30 movements of 30-60 cm from a quarter of its height."""
+    w, h = size_m
+    ref = ((w / 2 - 0.3, h / 2), (w / 2 + 0.3, h / 2))
+    start = (w / 2, h / 4)
+    rng = np.random.default_rng(seed)
+    landmarks: list[dict[str, Any]] = [
+        {"name": "L1", "x": ref[0][0], "y": ref[0][1], "color": "red"},
+        {"name": "L2", "x": ref[1][0], "y": ref[1][1], "color": "green"},
+    ]
+    points = list(ref)
+    while len(points) < n + 2:
+        x, y = rng.uniform(0.15, w - 0.15), rng.uniform(0.15, h - 0.15)
+        clear = math.dist((x, y), start) >= 0.15
+        if clear and all(math.dist((x, y), p) >= 0.3 for p in points):
+            points.append((x, y))
+            landmarks.append(
+                {"name": f"B{len(points) - 2}", "x": round(x, 4), "y": round(y, 4), "color": "blue"}
+            )
+    for lm in landmarks:
+        lm.update({"radius": 0.01, "height": 0.15})
+    return {
+        "arena": {"width": w, "height": h},
+        "landmarks": landmarks,
+        "reference": ["L1", "L2"],
+        "camera": {
+            **CAMERAS[camera],
+            "bearing_noise_deg": 1.0,
+            "pixel_noise": 2.0,
+            "lighting": True,
+        },
+        "vision_error_deg": 3.0,
+        "trajectory": {
+            "start": [start[0], start[1], 0.0],
+            "seed": seed,
+            "moves": 30,
+            "distance": [0.3, 0.6],
+        },
+        "robot": {"radius": 0.03},
+        "description": f"{n} identical blue landmarks in a {w} x {h} m arena ({camera})",
+    }
