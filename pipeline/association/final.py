@@ -608,15 +608,7 @@ def _final_share(
     e = mapped.get(name)
     if e is None or not poses:
         return 1.0
-    predicted = 0
-    for p in poses.values():
-        _, std = predict_bearings(
-            p.origin_fl,
-            p.heading_rad,
-            e.mean_fl[None, :],
-            e.cov_fl[None, :, :],
-            bearing_var_rad=model.sigma_rad**2,
-            pose_cov=p.cov,
-        )
-        predicted += bool(std[0] <= MAX_PRED_STD_EPS * model.eps_rad)
-    return sum(d.name == name for d in final) / max(predicted, 1)
+    given, predicted = given_share(
+        name, e, final, poses, noise_rad=model.sigma_rad, eps_rad=model.eps_rad
+    )
+    return given / max(predicted, 1)
