@@ -399,7 +399,8 @@ def assign_jointly(
         / np.maximum(var, 1e-18)[:, None]
     )
     gate = chi2_quantile(1)
-    ambiguous = set(got.ambiguous)
+    # a search stopped at its budget may have missed a better assignment: trust none of it
+    ambiguous = set(got.ambiguous) if got.complete else set(got.pairs)
     out = []
     for k, det in enumerate(dets):
         rows = np.flatnonzero(jp.keyframe == k)

@@ -303,3 +303,13 @@ def test_detections_with_no_landmark_visible_are_all_unexplained() -> None:
         1e-4,
     )
     assert a.pairs == [] and a.unexplained == [0, 1] and a.missing == []
+
+
+def test_a_search_stopped_at_its_budget_says_so() -> None:
+    pred = np.radians([0.0, 10.0, 20.0, 30.0])
+    cov = np.eye(4) * (1.0 * DEG) ** 2
+    det = pred + np.radians([0.3, -0.2, 0.1, 0.4])
+    kf = np.zeros(4, np.int64)
+    assert jcbb(pred, cov, kf, det, kf, 1e-6).complete
+    cut = jcbb(pred, cov, kf, det, kf, 1e-6, max_nodes=3)
+    assert not cut.complete and len(cut.pairs) < 4  # 3 nodes reach no full assignment
