@@ -30,7 +30,7 @@ def test_every_name_more_than_10_cm_off_is_flagged_by_name(
     assert off  # these layouts still put names off: else the test tests nothing
     trust = s.summary["trust"]
     assert not trust["trustworthy"]
-    line = result_line(s.summary)
+    line = result_line(s.result)
     flagged = {
         name
         for reason in trust["reasons"]

@@ -139,8 +139,8 @@ def test_weak_and_loosely_placed_names_are_flagged_by_name() -> None:
         "weak name(s) blue#3 (too few detections with the final map)",
         "name(s) blue#10 placed only to within 10 cm or worse",
     ]
-    doc["trust"] = trust_entry(doc)
-    assert "NOT trustworthy: weak name(s) blue#3" in result_line(doc)
+    summary = RunSummary(4, 4, 0, ("L1", "L2"), 3, untrusted=tuple(trust_reasons(doc)))
+    assert "NOT trustworthy: weak name(s) blue#3" in result_line(summary)
     # without the map's unit, no distance can be judged
     del doc["map_unit_m"]
     assert trust_reasons(doc) == ["weak name(s) blue#3 (too few detections with the final map)"]
