@@ -201,8 +201,11 @@ def _jacobian(s: Sightings, x: NDArray[np.float64]) -> NDArray[np.float64]:
     return _jacobian_of(_at(s, x))
 
 
-def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[np.float64]:
-    """Levenberg-Marquardt on the 4 movement parameters."""
+def _refine(
+    s: Sightings, x0: NDArray[np.float64], iters: int = 30
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Levenberg-Marquardt on the 4 movement parameters: the fit (4,) and its residuals (k,)
+    (:meth:`Sightings.residuals` there)."""
     x, lam = x0.copy(), 1e-3
     terms = _at(s, x)
     r = _wrapped_residuals(s, terms, x)
@@ -233,7 +236,7 @@ def _refine(s: Sightings, x0: NDArray[np.float64], iters: int = 30) -> NDArray[n
             lam *= 10.0
             if lam > 1e8:
                 break
-    return x
+    return x, r
 
 
 @dataclass(frozen=True)
@@ -301,20 +304,18 @@ def resect(
     order = np.argsort(cost)[: 1 if o1_known_fl is not None else 4]
     seeds = [cand.reshape(-1, 4)[i] for i in order]
     seeds += [pose_params(g) for g in guesses]
-    best: tuple[NDArray[np.float64], float] | None = None
+    best: tuple[NDArray[np.float64], NDArray[np.float64], float] | None = None
     for x0 in seeds:
-        x = _refine(s, x0)
-        r = _residuals_at(s, x)
+        x, r = _refine(s, x0)
         c = float(r @ r)
-        if best is None or c < best[1]:
-            best = (x, c)
+        if best is None or c < best[2]:
+            best = (x, r, c)
     assert best is not None
-    x = best[0]
+    x, r, _ = best
     keep = np.ones(s.bearings_rad.size, bool)
-    r = _residuals_at(s, x)
     while outlier_rad is not None and keep.sum() > 4 and np.abs(r[keep]).max() > outlier_rad:
         keep[np.flatnonzero(keep)[np.argmax(np.abs(r[keep]))]] = False  # a wrong detection
-        x = _refine(s.subset(keep), x)
+        x, _ = _refine(s.subset(keep), x)
         r = _residuals_at(s, x)
     pos, logd = determinacy(s.subset(keep), x, o1_known=o1_known_fl is not None)
     pose = MovementPose(x[:2].copy(), float(wrap_rad(float(x[2]))), float(_length(x[3])))

@@ -40,6 +40,15 @@ def robust_std(residuals_rad: NDArray[np.float64]) -> float:
     return 1.4826 * float(np.median(np.abs(residuals_rad)))
 
 
+def robust_rms(residuals_rad: NDArray[np.float64]) -> float:
+    """The robust RMS (rad) of residuals (k,) that the noise estimate reports
+    (:attr:`NoiseEstimate.robust_rms_rad`): :func:`robust_std`, at least :data:`FLOOR_RAD`
+    (0 without residuals)."""
+    if residuals_rad.size == 0:
+        return 0.0
+    return max(robust_std(residuals_rad), FLOOR_RAD)
+
+
 def posterior_variance(ssr_rad2: float, dof: int, bound_rad: float) -> float:
     """Posterior mean of ``sigma^2`` (rad^2) given ``dof`` degrees of freedom of residuals whose
     squares sum to ``ssr_rad2``, under a log-uniform prior on ``sigma`` in
@@ -102,7 +111,7 @@ def estimate_noise(
     if r.size == 0:
         var0 = sigma0_rad**2 if bound_rad is None else posterior_variance(0.0, 0, bound_rad)
         return NoiseEstimate(sigma0_rad, 0.0, 0.0, 0, 0, -n_params, var0)
-    robust = max(robust_std(r), FLOOR_RAD)
+    robust = robust_rms(r)
     inlier = np.abs(r) <= OUTLIER_K * max(robust, sigma0_rad * 0.25)
     ssr = float((r[inlier] ** 2).sum())
     dof = int(inlier.sum()) - n_params

@@ -21,7 +21,7 @@ from pipeline.estimate import LandmarkEstimate
 from pipeline.geometry import intersect_rays, predicted_bearings, widest_std
 from pipeline.joint import graph as g
 from pipeline.joint.mapgraph import MIN_RAY_PARALLAX_EPS, MapGraph
-from pipeline.joint.noise import estimate_noise
+from pipeline.joint.noise import robust_rms
 from pipeline.joint.state import MapState
 from pipeline.joint.table import by_landmark
 
@@ -104,8 +104,10 @@ def jumped(state: MapState, graph: MapGraph, before: dict[str, LandmarkEstimate]
         if name not in state.in_graph:
             continue
         step = float(np.hypot(*(graph.point(name) - prev.mean_fl)))
+        if step <= JUMP_FL:
+            continue
         spread = widest_std(prev.cov_fl)
-        if step > JUMP_FL and step > JUMP_SIGMAS * spread:
+        if step > JUMP_SIGMAS * spread:
             return f"{name} jumped {step:.3f} FL ({step / max(spread, 1e-12):.0f} sigma)"
     return ""
 
@@ -121,10 +123,10 @@ def misfit(state: MapState, graph: MapGraph, rms_limit_rad: float) -> str:
     r = graph.all_residuals(state)
     if far > max(1, MAX_REJECT_FRACTION * r.size):
         return f"{far} of {r.size} bearings more than {REJECT_EPS:g} eps from the map"
-    noise = estimate_noise(r, state.n_params(), settings.sigma0_rad)
-    if noise.robust_rms_rad > rms_limit_rad:
+    robust = robust_rms(r)
+    if robust > rms_limit_rad:
         limit = math.degrees(rms_limit_rad)
-        return f"robust residual RMS {math.degrees(noise.robust_rms_rad):.2f} deg > {limit:.2f}"
+        return f"robust residual RMS {math.degrees(robust):.2f} deg > {limit:.2f}"
     return ""
 
 
