@@ -322,6 +322,37 @@ def resect(
     return Resection(pose, r, keep, pos, logd)
 
 
+def place_chained(
+    s: Sightings, o1_fl: NDArray[np.float64], sigma_rad: float
+) -> tuple[MovementPose, float] | None:
+    """A movement that starts exactly at ``o1_fl`` (2,) FL, where the last one ended (the robot
+    turns in place), in closed form: heading from the bearings at O1 (circular mean), length
+    from those at O2 (least squares on the rays' perpendicular distances along the heading,
+    each weighted by 1 / range^2 from O1); with the std (FL) of that length for a bearing noise
+    of std ``sigma_rad``. None when the bearings at O2 do not fix the length.
+
+    Association places a chained movement with it (:mod:`pipeline.association.match`). The
+    joint estimator's :func:`resect` with ``o1_known_fl`` starts there but fits O1 too."""
+    at1, at2 = s.end == 0, s.end == 1
+    d1 = s.points_fl[at1] - o1_fl
+    ang = np.arctan2(d1[:, 1], d1[:, 0]) - s.bearings_rad[at1]
+    heading = math.atan2(float(np.sin(ang).sum()), float(np.cos(ang).sum()))
+    u = np.array([math.cos(heading), math.sin(heading)])
+    p2 = s.points_fl[at2]
+    dirs = heading + s.bearings_rad[at2]
+    n = np.column_stack((-np.sin(dirs), np.cos(dirs)))
+    w = 1.0 / np.maximum(((p2 - o1_fl) ** 2).sum(axis=1), 1e-9)
+    nu = n @ u
+    den = float((w * nu**2).sum())
+    if den < 1e-6 * float(w.sum()):
+        return None
+    t = -float((w * nu * ((o1_fl - p2) * n).sum(axis=1)).sum()) / den
+    if not t > 1e-3:
+        return None
+    pos_std = sigma_rad / math.sqrt(den)
+    return MovementPose(np.asarray(o1_fl, np.float64), heading, t), pos_std
+
+
 def pose_params(pose: MovementPose) -> NDArray[np.float64]:
     """A pose as the resection's parameters (4,): x, y (FL), heading (rad), log length."""
     return np.array([pose.o1_fl[0], pose.o1_fl[1], pose.heading_rad, math.log(pose.length_fl)])

@@ -13,8 +13,9 @@ clearly beats every pose that tells another story (:data:`MATCH_LEAD`).
 :func:`place_left_out` places, once the log is processed, the movements the map left out.
 
 Association places each movement itself before the estimator does (:func:`place_movement`):
-chained on the end of the previous movement when that one was placed (one bearing at each
-keyframe suffices), else by resection (:func:`pipeline.geometry.resect`, four bearings at
+chained on the end of the previous movement when that one was placed
+(:func:`pipeline.geometry.place_chained`; one bearing at each keyframe suffices), else by
+resection (:func:`pipeline.geometry.resect`, four bearings at
 least); the associator falls back on :func:`match_movement` after a placed movement.
 """
 
@@ -37,6 +38,7 @@ from pipeline.geometry import (
     Sightings,
     determinacy,
     keyframe_poses_of,
+    place_chained,
     pose_params,
     resect,
 )
@@ -470,7 +472,7 @@ def place_movement(
     s = Sightings(np.array(pts, np.float64).reshape(-1, 2), np.array(ends, np.int64), np.array(bs))
     n1, n2 = int((s.end == 0).sum()), int((s.end == 1).sum())
     if after_fl is not None and n1 >= 1 and n2 >= 1:
-        chained = _place_chained(s, after_fl, sigma_rad)
+        chained = place_chained(s, after_fl, sigma_rad)
         if chained is not None:
             r = s.residuals(pose_params(chained[0]))
             if robust_std(r) <= PLACEMENT_MAX_EPS * eps_rad:
@@ -484,32 +486,6 @@ def place_movement(
     if robust <= PLACEMENT_MAX_EPS * eps_rad and math.isfinite(found.position_std_fl):
         return found.pose, found.position_std_fl * sigma_rad
     return f"placement does not fit the map (robust residual {deg_text(robust)})"
-
-
-def _place_chained(
-    s: Sightings, o1_fl: NDArray[np.float64], sigma_rad: float
-) -> tuple[MovementPose, float] | None:
-    """A movement that starts where the last one ended (the robot turns in place): heading
-    from the bearings at O1, length from those at O2 (weighted least squares along the
-    heading); None when the bearings at O2 do not fix the length."""
-    at1, at2 = s.end == 0, s.end == 1
-    d1 = s.points_fl[at1] - o1_fl
-    ang = np.arctan2(d1[:, 1], d1[:, 0]) - s.bearings_rad[at1]
-    heading = math.atan2(float(np.sin(ang).sum()), float(np.cos(ang).sum()))
-    u = np.array([math.cos(heading), math.sin(heading)])
-    p2 = s.points_fl[at2]
-    dirs = heading + s.bearings_rad[at2]
-    n = np.column_stack((-np.sin(dirs), np.cos(dirs)))
-    w = 1.0 / np.maximum(((p2 - o1_fl) ** 2).sum(axis=1), 1e-9)
-    nu = n @ u
-    den = float((w * nu**2).sum())
-    if den < 1e-6 * float(w.sum()):
-        return None
-    t = -float((w * nu * ((o1_fl - p2) * n).sum(axis=1)).sum()) / den
-    if not t > 1e-3:
-        return None
-    pos_std = sigma_rad / math.sqrt(den)
-    return MovementPose(np.asarray(o1_fl, np.float64), heading, t), pos_std
 
 
 def matching_map(

@@ -15,7 +15,7 @@ import pipeline.joint.placement as joint_placement
 from data_schemas.errors import EstimationError
 from pipeline.batch_ls import batch_least_squares
 from pipeline.estimators import make_estimator
-from pipeline.geometry import Sightings, intersect_rays, resect
+from pipeline.geometry import Sightings, intersect_rays, place_chained, resect
 from pipeline.joint import robustness
 from pipeline.joint.estimator import JointSlam
 from pipeline.joint.graph import pose_key
@@ -363,6 +363,32 @@ def test_resection_recovers_a_movement_from_known_points() -> None:
     worst = math.sqrt(float(np.linalg.eigvalsh(cov[:2, :2]).max()))
     assert found.position_std_fl == pytest.approx(worst, rel=1e-6)
     assert found.log_length_std == pytest.approx(math.sqrt(cov[3, 3]), rel=1e-6)
+
+
+def test_a_chained_movement_keeps_its_start_and_needs_a_bearing_off_its_line_at_o2() -> None:
+    # one bearing at O1 and one at O2, exact: the start stays where it was given, heading and
+    # length are the true ones. With one O2 ray, at angle a to the line, weighted by 1 / r^2 (r
+    # its landmark's distance from O1), the length's std for a bearing noise sigma is, by hand,
+    # sigma * r / |sin a|
+    o1, h, d = np.array([0.5, -0.25]), -0.4, 0.6
+    o2 = o1 + d * np.array([math.cos(h), math.sin(h)])
+    a, b = np.array([2.0, 1.0]), np.array([0.0, 1.5])
+    bearing_a = math.atan2(a[1] - o1[1], a[0] - o1[0]) - h
+    bearing_b = math.atan2(b[1] - o2[1], b[0] - o2[0]) - h
+    s = Sightings(np.array([a, b]), np.array([0, 1]), np.array([bearing_a, bearing_b]))
+    found = place_chained(s, o1, 0.01)
+    assert found is not None
+    pose, std = found
+    assert np.array_equal(pose.o1_fl, o1)
+    assert pose.heading_rad == pytest.approx(h, abs=1e-12)
+    assert pose.length_fl == pytest.approx(d, abs=1e-12)
+    r1 = float(np.hypot(*(b - o1)))
+    sin_a = abs(math.sin(bearing_b))
+    assert std == pytest.approx(0.01 * r1 / sin_a, rel=1e-9)
+    # a landmark straight ahead on the movement's line does not fix the length
+    ahead = o1 + 3.0 * np.array([math.cos(h), math.sin(h)])
+    s = Sightings(np.array([a, ahead]), np.array([0, 1]), np.array([bearing_a, 0.0]))
+    assert place_chained(s, o1, 0.01) is None
 
 
 def test_ray_intersection_ignores_a_wrong_ray() -> None:
