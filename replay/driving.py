@@ -310,7 +310,8 @@ class DrivingRunner:
 
 
 def driving_summary(method: MethodConfig) -> dict[str, Any]:
-    """The summary's ``method`` entries of the driving estimator: keyframe rule, wheel noise."""
+    """The summary's ``method`` entries of the driving estimator: keyframe rule, wheel noise,
+    the keyframes kept in iSAM2 (None: every one) and how many leave it at once."""
     o = driving_options(method)
     return {
         "keyframe_distance_m": o.keyframes.distance_m,
@@ -318,4 +319,6 @@ def driving_summary(method: MethodConfig) -> dict[str, Any]:
         "odometry_std_per_m": o.wheel.trans_std_per_m,
         "odometry_heading_std_per_rad": o.wheel.rot_std_per_rad,
         "odometry_heading_std_per_m": o.wheel.rot_std_per_m,
+        "keyframe_window": o.window_keyframes,
+        "keyframe_window_stride": o.window_stride,
     }

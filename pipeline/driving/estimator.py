@@ -32,12 +32,14 @@ from data_schemas.errors import EstimationError
 from pipeline.cones import Degenerate
 from pipeline.crb import truncated_gaussian_std
 from pipeline.driving.factors import (
+    fixed_sensor_bearing_factor,
     gauge_factor,
     keyframe_key,
     odometry_factor,
     offset_bearing_factor,
 )
 from pipeline.driving.keyframes import KeyframeRule, KeyframeSelector
+from pipeline.driving.lag import drop_keyframes
 from pipeline.driving.odometry import WheelNoise, between, compose, interpolate
 from pipeline.driving.two_views import initialize_two_views
 from pipeline.estimate import LandmarkEstimate
@@ -76,6 +78,13 @@ class DrivingOptions:
         iSAM2's relinearization threshold.
     dogleg : bool
         Powell's dogleg steps in iSAM2 (else Gauss-Newton).
+    window_keyframes : int or None
+        Keyframes kept in iSAM2: once it holds ``window_keyframes + window_stride``, the oldest
+        ``window_stride`` are marginalized into one linear prior and their poses frozen
+        (None, the default: every keyframe stays; 50 bounds the cost per keyframe, at some
+        accuracy where landmarks are seen from few keyframes: docs/method.md).
+    window_stride : int
+        Keyframes that leave iSAM2 at once (one rebuild of iSAM2 per this many keyframes).
     """
 
     keyframes: KeyframeRule = field(default_factory=KeyframeRule)
@@ -90,6 +99,8 @@ class DrivingOptions:
     max_rays: int = 40
     relinearize_threshold: float = 0.01
     dogleg: bool = True
+    window_keyframes: int | None = None
+    window_stride: int = 25
 
 
 @dataclass(frozen=True)
@@ -214,18 +225,32 @@ class DrivingSlam:
         self.sigma0_rad = truncated_gaussian_std(vision_error_rad)
         self.rng = rng
         self.options = options or DrivingOptions()
+        o = self.options
+        if (o.window_keyframes is not None and o.window_keyframes < 1) or o.window_stride < 1:
+            raise EstimationError(
+                f"window of {o.window_keyframes} keyframes, stride {o.window_stride}: "
+                "both must be at least 1 (or the window None: every keyframe)"
+            )
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(self.options.relinearize_threshold)
         params.relinearizeSkip = 1
         if self.options.dogleg:
             params.setOptimizationParams(gtsam.ISAM2DoglegParams())
+        self._params = params
         self.isam = gtsam.ISAM2(params)
         self.selector = KeyframeSelector(self.options.keyframes)
-        #: every factor given to iSAM2, for a batch solve of the same problem
+        #: every factor of the problem (also those iSAM2 has marginalized or never got), for a
+        #: batch solve of it
         self.graph = gtsam.NonlinearFactorGraph()
         self._new = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
+        self._from_frozen = gtsam.NonlinearFactorGraph()  # bearings from frozen keyframes
         self._keyframes: list[tuple[int, NDArray[np.float64]]] = []  # (t_ns, odometry pose)
+        #: poses (3,) of the keyframes 0, 1, ... that left iSAM2, as they were when they left
+        self.frozen: list[NDArray[np.float64]] = []
+        #: bearings of landmarks entering late that hang on a frozen keyframe: in iSAM2 from
+        #: the keyframe's frozen pose, on the landmark alone
+        self.frozen_rays = 0
         self._window: dict[str, Ray] = {}
         self._prev: tuple[int, NDArray[np.float64]] | None = None  # last odometry sample
         self._waiting_bearings: list[tuple[int, dict[str, float], dict[str, float]]] = []
@@ -341,9 +366,12 @@ class DrivingSlam:
             else:
                 entered[name] = got
         self.graph.push_back(self._new)
+        self._new.push_back(self._from_frozen)
         self.isam.update(self._new, self._new_values)
+        self._from_frozen = gtsam.NonlinearFactorGraph()
         self._new = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
+        self._slide()
         last = len(self._keyframes) - 1
         return [
             KeyframeResult(
@@ -357,19 +385,38 @@ class DrivingSlam:
             )
         ]
 
+    def _slide(self) -> None:
+        """Marginalize the oldest keyframes once iSAM2 holds the window and its stride."""
+        window, stride = self.options.window_keyframes, self.options.window_stride
+        if window is None or len(self._keyframes) - len(self.frozen) < window + stride:
+            return
+        old = range(len(self.frozen), len(self._keyframes) - window)
+        self.isam, values = drop_keyframes(self.isam, self._params, [keyframe_key(k) for k in old])
+        for k in old:
+            p = values.atPose2(keyframe_key(k))
+            self.frozen.append(np.array([p.x(), p.y(), p.theta()]))
+
     def _bearing(self, name: str, ray: Ray) -> None:
         noise = self._noise.get(ray.sigma_rad)
         if noise is None:
             noise = self._noise[ray.sigma_rad] = bearing_noise(ray.sigma_rad, self.options.robust)
-        self._new.push_back(
-            offset_bearing_factor(
-                keyframe_key(ray.keyframe),
-                landmark_key(self.index[name]),
-                ray.bearing_rad,
-                ray.offset,
-                noise,
-            )
+        factor = offset_bearing_factor(
+            keyframe_key(ray.keyframe),
+            landmark_key(self.index[name]),
+            ray.bearing_rad,
+            ray.offset,
+            noise,
         )
+        if ray.keyframe < len(self.frozen):  # its keyframe left iSAM2: seen from a fixed pose
+            self.frozen_rays += 1
+            self.graph.push_back(factor)
+            sensor = compose(self.frozen[ray.keyframe], ray.offset)
+            factor = fixed_sensor_bearing_factor(
+                landmark_key(self.index[name]), sensor, ray.bearing_rad, noise
+            )
+            self._from_frozen.push_back(factor)
+        else:
+            self._new.push_back(factor)
 
     def _try_enter(self, name: str, ray: Ray) -> NDArray[np.float64] | str:
         """Initialize ``name`` from its new ray and the earlier one that crosses it widest."""
@@ -444,7 +491,10 @@ class DrivingSlam:
         return [t for t, _ in self._keyframes]
 
     def pose_m(self, k: int) -> NDArray[np.float64]:
-        """Keyframe ``k``'s pose (3,) (m, m, rad, map frame): the current estimate."""
+        """Keyframe ``k``'s pose (3,) (m, m, rad, map frame): the current estimate (a frozen
+        keyframe's: its estimate when it left iSAM2)."""
+        if k < len(self.frozen):
+            return self.frozen[k].copy()
         key = keyframe_key(k)
         if self._new_values.exists(key):
             p = self._new_values.atPose2(key)

@@ -82,3 +82,29 @@ def offset_bearing_factor(
         return np.array([float(wrap_rad(pred - bearing_rad))])
 
     return gtsam.CustomFactor(noise, [pose, landmark], error)
+
+
+def fixed_sensor_bearing_factor(
+    landmark: int,
+    sensor_pose: NDArray[np.float64],
+    bearing_rad: float,
+    noise: gtsam.noiseModel.Base,
+) -> gtsam.NonlinearFactor:
+    """Bearing of a landmark seen from a sensor held at ``sensor_pose`` (3,) (m, m, rad, map
+    frame): a bearing of a keyframe that has left the graph, on the landmark alone.
+
+    The error is ``wrap(predicted - measured)``; its Jacobian is in the point's coordinates.
+    """
+    sx, sy, sth = (float(v) for v in sensor_pose)
+
+    def error(
+        this: gtsam.CustomFactor, values: gtsam.Values, jac: list[NDArray[np.float64]] | None
+    ) -> NDArray[np.float64]:
+        pt = values.atPoint2(this.keys()[0])
+        dx, dy = float(pt[0]) - sx, float(pt[1]) - sy
+        if jac is not None:
+            r2 = max(dx * dx + dy * dy, 1e-18)
+            jac[0] = np.array([[-dy / r2, dx / r2]])
+        return np.array([float(wrap_rad(math.atan2(dy, dx) - sth - bearing_rad))])
+
+    return gtsam.CustomFactor(noise, [landmark], error)
