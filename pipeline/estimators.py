@@ -97,12 +97,14 @@ def make_estimator(
     n_l: int,
     turn_prior_sigma_rad: float | None,
     distance_prior_rel: float | None,
+    window: int | None,
 ) -> Estimator:
     """The estimator called ``name`` (``"joint"`` or ``"paper"``), set up for one run.
 
     ``paper`` is :class:`~pipeline.slam.BearingSlam` exactly as the paper's method;
     ``joint`` is :class:`~pipeline.joint.JointSlam`, initialized by the same filter.
-    ``turn_prior_sigma_rad`` and ``distance_prior_rel`` only concern the joint estimator. Every
+    ``turn_prior_sigma_rad``, ``distance_prior_rel`` and ``window`` (movements kept in the
+    graph, None: every one) only concern the joint estimator. Every
     setting is given: the defaults live in one place, ``replay.defaults`` (used through
     ``replay.records.MethodConfig`` and ``replay.estimation.estimator_for``).
     """
@@ -118,6 +120,7 @@ def make_estimator(
             rng=rng,
             turn_prior_sigma_rad=turn_prior_sigma_rad,
             distance_prior_rel=distance_prior_rel,
+            window=window,
             **common,  # type: ignore[arg-type]
         )
     raise EstimationError(f"unknown estimator {name!r}; use one of {', '.join(ESTIMATORS)}")

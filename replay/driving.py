@@ -100,7 +100,13 @@ def driving_options(method: MethodConfig) -> DrivingOptions:
         wheel = replace(wheel, trans_std_per_m=method.odometry_std_per_m)
     if method.odometry_heading_std_per_rad is not None:
         wheel = replace(wheel, rot_std_per_rad=method.odometry_heading_std_per_rad)
-    return replace(base, keyframes=rule, wheel=wheel, prior=method.prior_name)
+    return replace(
+        base,
+        keyframes=rule,
+        wheel=wheel,
+        prior=method.prior_name,
+        window_keyframes=method.keyframe_window or None,
+    )
 
 
 def _detections(names: Sequence[str], r: KeyframeResult) -> dict[str, Detection]:

@@ -32,6 +32,7 @@ def estimator_for(
         rng=np.random.default_rng(method.seed),
         turn_prior_sigma_rad=turn,
         distance_prior_rel=method.distance_prior,
+        window=method.window or None,
     )
 
 

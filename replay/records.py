@@ -57,6 +57,12 @@ class MethodConfig:
     odometry_std_per_m, odometry_heading_std_per_rad : float or None
         Driving logs: the wheel model's position std per metre of path and heading std per
         radian turned (None: :mod:`pipeline.driving.odometry`'s defaults).
+    window : int
+        Joint estimator: movements kept in the graph, older ones marginalized
+        (:mod:`pipeline.joint.window`); 0 keeps every movement.
+    keyframe_window : int
+        Driving logs: keyframes kept in iSAM2, older ones marginalized
+        (:mod:`pipeline.driving.lag`); 0 keeps every keyframe.
     """
 
     prior: str = defaults.PRIOR
@@ -70,6 +76,8 @@ class MethodConfig:
     keyframe_turn_deg: float | None = None
     odometry_std_per_m: float | None = None
     odometry_heading_std_per_rad: float | None = None
+    window: int = defaults.JOINT_WINDOW
+    keyframe_window: int = defaults.KEYFRAME_WINDOW
 
     def __post_init__(self) -> None:
         if self.prior not in PRIORS:
@@ -90,6 +98,9 @@ class MethodConfig:
         ):
             if v is not None and not (math.isfinite(v) and v > 0.0):
                 raise EstimationError(f"{what} must be a finite number > 0, got {v}")
+        for what, n in (("window", self.window), ("keyframe window", self.keyframe_window)):
+            if n < 0:
+                raise EstimationError(f"{what} must be a count >= 0 (0: keep all), got {n}")
 
     @property
     def prior_name(self) -> PriorName:
@@ -110,6 +121,8 @@ class MethodConfig:
             out["turn_prior_deg"] = self.turn_prior_deg
         if self.estimator == "joint" and self.distance_prior is not None:
             out["distance_prior"] = self.distance_prior
+        if self.estimator == "joint" and self.window != defaults.JOINT_WINDOW:
+            out["window"] = self.window
         return out
 
 

@@ -23,6 +23,7 @@ from typing import Any, Literal
 
 from data_schemas.errors import BslamError, LogError
 from pipeline.estimators import ESTIMATORS
+from replay import defaults
 from replay.defaults import ESTIMATOR as DEFAULT_ESTIMATOR
 from replay.records import MethodConfig
 
@@ -111,6 +112,7 @@ def method_of(expected: Mapping[str, Any]) -> MethodConfig:
         estimator=m.get("estimator", "paper"),
         turn_prior_deg=m.get("turn_prior_deg"),
         distance_prior=m.get("distance_prior"),
+        window=m.get("window", defaults.JOINT_WINDOW),
     )
 
 

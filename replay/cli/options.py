@@ -153,6 +153,17 @@ driving_method_options = [
         metavar="RAD_PER_RAD",
         help="Driving logs: odometry heading std per radian turned [default: 0.2].",
     ),
+    click.option(
+        "--keyframe-window",
+        "keyframe_window",
+        type=click.IntRange(min=0),
+        default=defaults.KEYFRAME_WINDOW,
+        show_default=True,
+        metavar="KEYFRAMES",
+        help="Driving logs: keep the newest KEYFRAMES keyframes in the graph and marginalize "
+        "older ones (cost per keyframe stays flat on long drives; less accurate with narrow "
+        "views); 0 keeps every keyframe.",
+    ),
 ]
 
 
@@ -169,6 +180,17 @@ _METHOD_OPTIONS = [
         "(degrees) [default: turns free].",
     ),
     distance_prior_option,
+    click.option(
+        "--window",
+        "window",
+        type=click.IntRange(min=0),
+        default=defaults.JOINT_WINDOW,
+        show_default=True,
+        metavar="MOVEMENTS",
+        help="Joint estimator: keep the newest MOVEMENTS movements in the graph (at least 50) "
+        "and marginalize older ones (cost per movement stays flat on long logs); 0 keeps "
+        "every movement.",
+    ),
     click.option(
         "--prior",
         type=click.Choice(defaults.PRIORS),
@@ -202,6 +224,8 @@ _METHOD_FIELDS = (
     "keyframe_turn_deg",
     "odometry_std_per_m",
     "odometry_heading_std_per_rad",
+    "window",
+    "keyframe_window",
 )
 
 

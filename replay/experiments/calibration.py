@@ -97,6 +97,7 @@ def score_observations(
         n_l=defaults.N_L,
         turn_prior_sigma_rad=None,
         distance_prior_rel=defaults.DISTANCE_PRIOR_REL,
+        window=defaults.JOINT_WINDOW,
     )
     for obs in observations:
         slam.process_movement(obs)

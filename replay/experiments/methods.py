@@ -21,6 +21,7 @@ from pipeline.batch_ls import batch_least_squares
 from pipeline.crb import cramer_rao_bound
 from pipeline.estimators import make_estimator
 from pipeline.slam import BearingSlam, MovementObservation
+from replay import defaults
 from replay.experiments.results import CRB, ErrorRow
 from replay.experiments.scoring import score_rows
 
@@ -125,6 +126,7 @@ def joint_rows(
         rng=rng,
         turn_prior_sigma_rad=None,  # simulated straight movements: no commanded turn is trusted
         distance_prior_rel=distance_prior_rel,
+        window=defaults.JOINT_WINDOW,
     )
     rows = []
     for k, obs in enumerate(observations, start=1):

@@ -27,6 +27,7 @@ import numpy as np
 
 from pipeline.estimators import make_estimator
 from pipeline.fusion import PAPER_N_L, PAPER_N_R
+from pipeline.joint.window import DEFAULT_WINDOW
 from pipeline.synthetic import simulate_bearings
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "replay"))
@@ -56,6 +57,7 @@ def _yardstick(n: int, seed: int) -> float:
         n_l=PAPER_N_L,
         turn_prior_sigma_rad=None,
         distance_prior_rel=None,
+        window=DEFAULT_WINDOW,
     )
     tick = time.perf_counter()
     for obs in sim.observations:

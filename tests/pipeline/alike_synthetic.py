@@ -14,6 +14,7 @@ from pipeline.association import Associator, MovementAssociation
 from pipeline.association.final import FinalDetection
 from pipeline.estimators import make_estimator
 from pipeline.fusion import PAPER_N_L, PAPER_N_R
+from pipeline.joint.window import DEFAULT_WINDOW
 from pipeline.slam import MovementObservation
 from pipeline.synthetic import simulate_bearings
 from recorder.sim.world import Arena, Landmark, SimWorld
@@ -130,6 +131,7 @@ def run_synthetic(
         n_l=PAPER_N_L,
         turn_prior_sigma_rad=None,
         distance_prior_rel=None,
+        window=DEFAULT_WINDOW,
     )
     out = SyntheticRun(assoc, truth_fl=sim.truth_fl(("L1", "L2")), unit_m=math.dist(*REFERENCE_M))
     posts = None

@@ -305,6 +305,7 @@ FREE: dict[str, Any] = {
     "n_l": 300,
     "turn_prior_sigma_rad": None,
     "distance_prior_rel": None,
+    "window": None,
 }
 
 

@@ -41,7 +41,7 @@ def test_paper_estimator_does_not_import_gtsam() -> None:
         "from pipeline.estimators import make_estimator\n"
         "from replay.stages import Runner\n"
         "free = dict(prior='impartial', n_r=50, n_l=300, turn_prior_sigma_rad=None,"
-        " distance_prior_rel=None)\n"
+        " distance_prior_rel=None, window=None)\n"
         "make_estimator('paper', ['A', 'B'], ('A', 'B'), vision_error_rad=0.05,"
         " rng=np.random.default_rng(0), **free)\n"
         "assert 'gtsam' not in sys.modules\n"

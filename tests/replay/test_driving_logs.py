@@ -172,3 +172,34 @@ def test_help_states_the_driving_estimators_defaults() -> None:
         params = {p.name: p for p in found.params}
         for name, value in want.items():
             assert f"[default: {value:g}]" in (params[name].help or ""), (command, name)
+
+
+def test_keyframe_window_from_the_command_line(drive_log: Path, tmp_path: Path) -> None:
+    """``--keyframe-window`` reaches the estimator: older keyframes leave the graph (the map
+    moves off the one that keeps every keyframe) and the map still holds against the truth."""
+    docs = {}
+    for window in ("0", "20"):
+        summary = tmp_path / f"s{window}.json"
+        args = ["process", str(drive_log), "--keyframe-window", window, "--summary", str(summary)]
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 0, result.output
+        docs[window] = json.loads(summary.read_text())
+    assert docs["0"]["method"]["keyframe_window"] is None  # 0: every keyframe
+    assert docs["20"]["method"]["keyframe_window"] == 20
+    assert len(docs["20"]["movements"]) > 20 + docs["20"]["method"]["keyframe_window_stride"]
+    means = {w: {n: e["mean"] for n, e in d["landmarks"].items()} for w, d in docs.items()}
+    assert means["20"] != means["0"]
+    session, _ = read_back(drive_log)
+    truth = {t["name"]: (t["x_m"], t["y_m"]) for t in session["truth"]["landmarks"]}
+    l1, l2 = truth["L1"], truth["L2"]
+    errors_m = [
+        abs(complex(*m) - _fl(truth[name], l1, l2)) * math.dist(l1, l2)
+        for name, m in means["20"].items()
+    ]
+    assert np.mean(errors_m) < 0.10 and max(errors_m) < 0.20, errors_m
+
+
+def test_keyframe_window_below_zero_is_a_usage_error(drive_log: Path) -> None:
+    result = CliRunner().invoke(cli, ["process", str(drive_log), "--keyframe-window", "-1"])
+    assert result.exit_code == 2
+    assert "--keyframe-window" in result.output
