@@ -31,9 +31,9 @@ DISTANCE_PRIOR_REL: float | None = 0.05
 #: Joint estimator: movements kept in the graph, older ones marginalized into a prior
 #: (``pipeline.joint.window.DEFAULT_WINDOW``; a test holds them equal); 0 keeps every one.
 JOINT_WINDOW = 100
-#: Driving logs: keyframes kept in iSAM2, older ones marginalized; 0 keeps every one (the
-#: window costs accuracy with narrow views: docs/method.md, "A driving robot").
-KEYFRAME_WINDOW = 0
+#: Driving logs: keyframes kept in iSAM2, older ones marginalized
+#: (``pipeline.driving.lag.DEFAULT_KEYFRAME_WINDOW``; a test holds them equal); 0 keeps every one.
+KEYFRAME_WINDOW = 50
 
 #: Bound eps (degrees) on the bearing error of an imported log whose source does not give one:
 #: the impartial PDF's angular width, the paper's 3 deg. UTIAS MRCLAM's camera against its

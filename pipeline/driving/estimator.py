@@ -39,7 +39,7 @@ from pipeline.driving.factors import (
     offset_bearing_factor,
 )
 from pipeline.driving.keyframes import KeyframeRule, KeyframeSelector
-from pipeline.driving.lag import drop_keyframes
+from pipeline.driving.lag import DEFAULT_KEYFRAME_WINDOW, drop_keyframes
 from pipeline.driving.odometry import WheelNoise, between, compose, interpolate
 from pipeline.driving.two_views import initialize_two_views
 from pipeline.estimate import LandmarkEstimate
@@ -81,10 +81,17 @@ class DrivingOptions:
     window_keyframes : int or None
         Keyframes kept in iSAM2: once it holds ``window_keyframes + window_stride``, the oldest
         ``window_stride`` are marginalized into one linear prior and their poses frozen
-        (None, the default: every keyframe stays; 50 bounds the cost per keyframe, at some
-        accuracy where landmarks are seen from few keyframes: docs/method.md).
+        (None: every keyframe stays; the default bounds the cost per keyframe: docs/method.md,
+        "A driving robot").
     window_stride : int
         Keyframes that leave iSAM2 at once (one rebuild of iSAM2 per this many keyframes).
+    settle_keyframes : int
+        A keyframe stays in iSAM2 while a landmark it sees entered the map fewer than this many
+        keyframes ago (its bearings are not linearized while the landmark is still moving),
+        unless iSAM2 holds ``2 * window_keyframes + window_stride`` keyframes.
+    frozen_pose_noise : bool
+        A bearing from a frozen keyframe gets the frozen pose's uncertainty (its marginal
+        covariance when it left, propagated to the bearing) added to its own.
     """
 
     keyframes: KeyframeRule = field(default_factory=KeyframeRule)
@@ -99,8 +106,10 @@ class DrivingOptions:
     max_rays: int = 40
     relinearize_threshold: float = 0.01
     dogleg: bool = True
-    window_keyframes: int | None = None
+    window_keyframes: int | None = DEFAULT_KEYFRAME_WINDOW
     window_stride: int = 25
+    settle_keyframes: int = 100
+    frozen_pose_noise: bool = True
 
 
 @dataclass(frozen=True)
@@ -248,6 +257,9 @@ class DrivingSlam:
         self._keyframes: list[tuple[int, NDArray[np.float64]]] = []  # (t_ns, odometry pose)
         #: poses (3,) of the keyframes 0, 1, ... that left iSAM2, as they were when they left
         self.frozen: list[NDArray[np.float64]] = []
+        #: frozen keyframe -> its pose's covariance (3, 3) (local frame) when it left (those
+        #: holding bearings of landmarks not yet mapped)
+        self._frozen_cov: dict[int, NDArray[np.float64]] = {}
         #: bearings of landmarks entering late that hang on a frozen keyframe: in iSAM2 from
         #: the keyframe's frozen pose, on the landmark alone
         self.frozen_rays = 0
@@ -256,6 +268,8 @@ class DrivingSlam:
         self._waiting_bearings: list[tuple[int, dict[str, float], dict[str, float]]] = []
         self._rays: dict[str, list[Ray]] = {}
         self.mapped: set[str] = set()
+        #: landmark -> (keyframe it entered at, first keyframe of its bearings in iSAM2)
+        self._entered: dict[str, tuple[int, int]] = {}
         self._noise: dict[float, gtsam.noiseModel.Base] = {}
         self._finished = False
 
@@ -386,11 +400,25 @@ class DrivingSlam:
         ]
 
     def _slide(self) -> None:
-        """Marginalize the oldest keyframes once iSAM2 holds the window and its stride."""
+        """Marginalize the oldest keyframes once iSAM2 holds the window and its stride: at least
+        a stride of them, none from the first keyframe of a landmark younger than
+        ``settle_keyframes`` on (unless iSAM2 holds twice the window and the stride)."""
         window, stride = self.options.window_keyframes, self.options.window_stride
         if window is None or len(self._keyframes) - len(self.frozen) < window + stride:
             return
-        old = range(len(self.frozen), len(self._keyframes) - window)
+        last = len(self._keyframes) - 1
+        end = len(self._keyframes) - window
+        if len(self._keyframes) - len(self.frozen) < 2 * window + stride:
+            for at, first in self._entered.values():
+                if at > last - self.options.settle_keyframes:
+                    end = min(end, first)
+            if end - len(self.frozen) < stride:
+                return
+        old = range(len(self.frozen), end)
+        if self.options.frozen_pose_noise:
+            waiting = {r.keyframe for rays in self._rays.values() for r in rays}
+            for k in waiting.intersection(old):
+                self._frozen_cov[k] = np.asarray(self.isam.marginalCovariance(keyframe_key(k)))
         self.isam, values = drop_keyframes(self.isam, self._params, [keyframe_key(k) for k in old])
         for k in old:
             p = values.atPose2(keyframe_key(k))
@@ -411,12 +439,33 @@ class DrivingSlam:
             self.frozen_rays += 1
             self.graph.push_back(factor)
             sensor = compose(self.frozen[ray.keyframe], ray.offset)
+            if ray.keyframe in self._frozen_cov:
+                noise = self._frozen_noise(name, ray)
             factor = fixed_sensor_bearing_factor(
                 landmark_key(self.index[name]), sensor, ray.bearing_rad, noise
             )
             self._from_frozen.push_back(factor)
         else:
             self._new.push_back(factor)
+
+    def _frozen_noise(self, name: str, ray: Ray) -> gtsam.noiseModel.Base:
+        """The noise of ``ray`` (on a frozen keyframe) with its frozen pose's covariance
+        propagated to the bearing (numeric Jacobian at the landmark's entry point)."""
+        key = landmark_key(self.index[name])
+        if self._new_values.exists(key):
+            pt = np.asarray(self._new_values.atPoint2(key))
+        else:
+            pt = np.asarray(self.isam.calculateEstimatePoint2(key))
+        pose = self.frozen[ray.keyframe]
+
+        def bearing(d: NDArray[np.float64]) -> float:
+            s = compose(compose(pose, d), ray.offset)
+            return math.atan2(float(pt[1] - s[1]), float(pt[0] - s[0])) - float(s[2])
+
+        h, at = 1e-6, bearing(np.zeros(3))
+        jac = np.array([float(wrap_rad(bearing(h * e) - at)) / h for e in np.eye(3)])
+        var = ray.sigma_rad**2 + float(jac @ self._frozen_cov[ray.keyframe] @ jac)
+        return bearing_noise(math.sqrt(var), self.options.robust)
 
     def _try_enter(self, name: str, ray: Ray) -> NDArray[np.float64] | str:
         """Initialize ``name`` from its new ray and the earlier one that crosses it widest."""
@@ -476,6 +525,7 @@ class DrivingSlam:
         del self._rays[name]
         for i in agree:  # the others are taken for wrong detections
             self._bearing(name, earlier[i])
+        self._entered[name] = (ray.keyframe, min(earlier[i].keyframe for i in agree))
         return np.asarray(point, np.float64)
 
     # ---- the map -----------------------------------------------------------------------

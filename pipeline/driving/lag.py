@@ -16,6 +16,11 @@ import gtsam
 
 from pipeline.joint.window import marginalize
 
+#: Keyframes a driving map keeps in iSAM2 by default (``replay.defaults.KEYFRAME_WINDOW``; a
+#: test holds them equal): late/early cost per keyframe 0.9x on a 10-minute drive
+#: (docs/benchmarks.md).
+DEFAULT_KEYFRAME_WINDOW = 50
+
 
 def drop_keyframes(
     isam: gtsam.ISAM2, params: gtsam.ISAM2Params, old_keys: Sequence[int]

@@ -56,7 +56,7 @@ def test_fixed_sensor_bearing_matches_gtsam_bearing_factor() -> None:
 
 
 def test_window_keeps_the_newest_keyframes_and_freezes_the_others() -> None:
-    opts = DrivingOptions(window_keyframes=10, window_stride=5)
+    opts = DrivingOptions(window_keyframes=10, window_stride=5, settle_keyframes=0)
     slam = _drive("square", 3, 60.0, opts)
     n = slam.n_keyframes
     assert n > 30
@@ -68,6 +68,19 @@ def test_window_keeps_the_newest_keyframes_and_freezes_the_others() -> None:
     traj = slam.trajectory_m()
     assert traj.shape == (n, 3)
     assert traj[: len(slam.frozen)] == pytest.approx(np.array(slam.frozen))
+
+
+def test_young_landmarks_hold_their_keyframes_up_to_twice_the_window() -> None:
+    # settling: keyframes seeing a landmark that entered lately stay, iSAM2 grows up to
+    # 2 * window + stride keyframes; without it the window and its stride
+    frozen = {}
+    for settle in (0, 10**6):
+        opts = DrivingOptions(window_keyframes=10, window_stride=5, settle_keyframes=settle)
+        slam = _drive("square", 3, 60.0, opts)
+        live = slam.n_keyframes - len(slam.frozen)
+        assert 10 <= live <= (15 if settle == 0 else 25) + 1
+        frozen[settle] = len(slam.frozen)
+    assert 0 < frozen[10**6] < frozen[0]
 
 
 def test_windowed_map_is_the_whole_graphs_optimum() -> None:
@@ -98,7 +111,7 @@ def test_windowed_map_is_the_whole_graphs_optimum() -> None:
 
 
 def test_window_none_keeps_every_keyframe() -> None:
-    slam = _drive("square", 3, 40.0, DrivingOptions())  # the default: no window
+    slam = _drive("square", 3, 40.0, DrivingOptions(window_keyframes=None))
     assert slam.frozen == []
     assert slam.isam.calculateEstimate().exists(keyframe_key(0))
 

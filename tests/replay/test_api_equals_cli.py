@@ -35,6 +35,12 @@ def test_window_reaches_the_joint_estimator(small_log: Path, tmp_path: Path) -> 
     from replay.regress import method_of
 
     assert defaults.JOINT_WINDOW == DEFAULT_WINDOW  # the CLI's default is the estimator's
+    from pipeline.driving.estimator import DrivingOptions
+    from pipeline.driving.lag import DEFAULT_KEYFRAME_WINDOW
+
+    # and the driving estimator's window: the CLI's, the library's and the options' agree
+    assert defaults.KEYFRAME_WINDOW == DEFAULT_KEYFRAME_WINDOW
+    assert DrivingOptions().window_keyframes == DEFAULT_KEYFRAME_WINDOW
     # below the estimator's smallest window: its own one-line error, exit 1
     result = CliRunner().invoke(cli, ["process", str(small_log), "--window", str(MIN_WINDOW - 1)])
     assert result.exit_code == 1
