@@ -17,7 +17,7 @@ import gtsam
 from pipeline.joint.window import marginalize
 
 #: Keyframes a driving map keeps in iSAM2 by default (``replay.defaults.KEYFRAME_WINDOW``; a
-#: test holds them equal): late/early cost per keyframe 0.9x on a 10-minute drive
+#: test holds them equal): late/early cost per keyframe 0.78x on a 10-minute drive
 #: (docs/benchmarks.md).
 DEFAULT_KEYFRAME_WINDOW = 50
 

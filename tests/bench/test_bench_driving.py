@@ -11,7 +11,7 @@ from the truth (the optimum these bearings and this odometry allow). Goals (issu
 ``BSLAM_MRCLAM=/path/to/MRCLAM_Dataset1 python -m pytest tests/bench/test_bench_driving.py -s``.
 
 Cost per keyframe: a long simulated drive (10 minutes, about 750 keyframes, the 8-landmark
-room; ``BSLAM_DRIVE_S``, ``BSLAM_DRIVE_ARENA`` change it) through a window of 50 keyframes and
+room; ``BSLAM_DRIVE_S``, ``BSLAM_DRIVE_ARENA`` change it) through the default window (50) and
 through every keyframe, the two in lockstep in the same run; the median CPU time of
 ``DrivingSlam.odometry`` calls that make a keyframe, keyframes 50-100 against the last 100, and
 each final map's error after a similarity fit to the truth. Goal (issue 31): the window's late
@@ -32,6 +32,7 @@ import pytest
 from data_schemas.mcap.processable import ProcessableLog
 from pipeline.driving.estimator import DrivingOptions, DrivingSlam
 from pipeline.driving.evaluate import batch_from_truth, similarity_fit
+from pipeline.driving.lag import DEFAULT_KEYFRAME_WINDOW
 from pipeline.driving.simulate import DrivingSpec, arenas, simulate_drive
 from replay.driving import DrivingRunner
 from replay.importers.mrclam import MrclamImporter
@@ -101,8 +102,8 @@ def test_mrclam_dataset1_robots(tmp_path: Path) -> None:
         assert x["mean_m"] <= 1.5 * x["batch_m"]
 
 
-#: The window of the cost bench (keyframes kept in iSAM2; 25 more before the oldest leave).
-WINDOW = 50
+#: The window of the cost bench (the default; 25 more before the oldest leave).
+WINDOW = DEFAULT_KEYFRAME_WINDOW
 #: Keyframes of the early and the late stretch compared (issue 31: 50 -> 100 against late).
 EARLY = slice(50, 100)
 LATE_N = 100
