@@ -8,6 +8,7 @@ import math
 import gtsam
 import numpy as np
 import pytest
+from driving_runs import run_drive
 
 from pipeline.cones import Degenerate
 from pipeline.driving.estimator import DrivingOptions, DrivingSlam
@@ -15,7 +16,6 @@ from pipeline.driving.evaluate import batch_from_truth, similarity_fit
 from pipeline.driving.factors import keyframe_key, offset_bearing_factor
 from pipeline.driving.keyframes import KeyframeRule, select_keyframes
 from pipeline.driving.odometry import WheelNoise
-from pipeline.driving.simulate import DrivingSpec, arenas, simulate_drive
 from pipeline.driving.two_views import initialize_two_views
 from pipeline.frame_change import from_fl, to_fl
 from pipeline.joint.graph import landmark_key
@@ -199,22 +199,7 @@ def test_similarity_fit_of_a_similar_copy_is_exact() -> None:
 def drive(arena: str, seed: int, duration_s: float) -> tuple[float, float, int, int]:
     """Mean map error (m) of the estimator and of the batch optimum from truth, after a
     similarity fit to truth; landmarks mapped and in the arena."""
-    a = arenas()[arena]
-    run = simulate_drive(a, DrivingSpec(duration_s=duration_s), np.random.default_rng(seed))
-    slam = DrivingSlam(
-        list(a.landmarks_world),
-        a.reference,
-        vision_error_rad=math.radians(2.0),
-        rng=np.random.default_rng(seed),
-    )
-    sets = iter(run.bearing_sets)
-    pending = next(sets, None)
-    for t, pose in zip(run.t_ns, run.odometry, strict=True):
-        while pending is not None and pending[0] <= t:
-            slam.bearings(*pending)
-            pending = next(sets, None)
-        slam.odometry(int(t), pose)
-    slam.finish()
+    a, run, slam = run_drive(arena, seed, duration_s)
     pts = slam.landmarks_m()
     names = list(pts)
     truth = np.array([a.landmarks_world[n] for n in names])

@@ -3,39 +3,21 @@ the whole graph (GTSAM's Levenberg-Marquardt and Marginals) and against keeping 
 
 from __future__ import annotations
 
-import math
-
 import gtsam
 import numpy as np
 import pytest
+from driving_runs import run_drive
 
 from data_schemas.errors import EstimationError
 from pipeline.driving.estimator import DrivingOptions, DrivingSlam
 from pipeline.driving.evaluate import similarity_fit
 from pipeline.driving.factors import fixed_sensor_bearing_factor, keyframe_key
-from pipeline.driving.simulate import DrivingSpec, arenas, simulate_drive
+from pipeline.driving.simulate import arenas
 from pipeline.joint.graph import landmark_key
 
 
 def _drive(arena: str, seed: int, duration_s: float, options: DrivingOptions) -> DrivingSlam:
-    a = arenas()[arena]
-    run = simulate_drive(a, DrivingSpec(duration_s=duration_s), np.random.default_rng(seed))
-    slam = DrivingSlam(
-        list(a.landmarks_world),
-        a.reference,
-        vision_error_rad=math.radians(2.0),
-        rng=np.random.default_rng(seed),
-        options=options,
-    )
-    sets = iter(run.bearing_sets)
-    pending = next(sets, None)
-    for t, pose in zip(run.t_ns, run.odometry, strict=True):
-        while pending is not None and pending[0] <= t:
-            slam.bearings(*pending)
-            pending = next(sets, None)
-        slam.odometry(int(t), pose)
-    slam.finish()
-    return slam
+    return run_drive(arena, seed, duration_s, options)[2]
 
 
 def test_fixed_sensor_bearing_matches_gtsam_bearing_factor() -> None:
