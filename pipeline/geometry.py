@@ -85,8 +85,9 @@ def predicted_bearings(
     points_fl: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """Bearings (k,) of points (k, 2) seen from origins (k, 2) with headings (k,), in [-pi, pi)."""
-    d = points_fl - origins_fl
-    return wrap_rad(np.arctan2(d[:, 1], d[:, 0]) - headings_rad)
+    dx = points_fl[:, 0] - origins_fl[:, 0]  # by column: arctan2 on strided rows is 2x slower
+    dy = points_fl[:, 1] - origins_fl[:, 1]
+    return wrap_rad(np.arctan2(dy, dx) - headings_rad)
 
 
 #: Minimal parallax (rad) for a two-view triangulation (:func:`triangulate_fr`) to count.
@@ -210,14 +211,14 @@ def _refine(
     terms = _at(s, x)
     r = _wrapped_residuals(s, terms, x)
     cost = float(r @ r)
-    diag = np.arange(4)
     normal: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     for _ in range(iters):
         if normal is None:  # the Jacobian changes only when a step is taken
             jac = _jacobian_of(terms)  # residual = measured - predicted: d residual = -jac
             normal = jac.T @ jac, jac.T @ r
         a = normal[0].copy()
-        a[diag, diag] += lam * (a[diag, diag] + 1e-12)
+        diag = a.flat[::5]  # the diagonal of the 4 x 4 (a copy)
+        a.flat[::5] = diag + lam * (diag + 1e-12)
         try:
             delta = np.linalg.solve(a, normal[1])
         except np.linalg.LinAlgError:

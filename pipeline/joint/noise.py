@@ -18,6 +18,7 @@ pulls a map of precise bearings towards eps.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -59,12 +60,24 @@ def posterior_variance(ssr_rad2: float, dof: int, bound_rad: float) -> float:
     posterior is that likelihood, summed on a grid of ``u`` (:data:`POSTERIOR_GRID` points,
     trapezoidal rule).
     """
-    lo, hi = math.log(FLOOR_RAD), math.log(max(bound_rad, FLOOR_RAD * 1.001))
-    u = np.linspace(lo, hi, POSTERIOR_GRID)
-    log_w = -max(dof, 0) * u - 0.5 * max(ssr_rad2, 0.0) * np.exp(-2.0 * u)
+    u, inv_var, var = _grid(math.log(max(bound_rad, FLOOR_RAD * 1.001)))
+    log_w = -max(dof, 0) * u - 0.5 * max(ssr_rad2, 0.0) * inv_var
     w = np.exp(log_w - log_w.max())
     w[[0, -1]] *= 0.5  # the trapezoidal rule
-    return float((w * np.exp(2.0 * u)).sum() / w.sum())
+    return float((w * var).sum() / w.sum())
+
+
+@functools.lru_cache(maxsize=8)
+def _grid(
+    hi: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The grid of :func:`posterior_variance` up to log sigma ``hi``: ``u = log sigma``,
+    ``sigma^-2`` and ``sigma^2`` (:data:`POSTERIOR_GRID`,) each (read-only: shared)."""
+    u = np.linspace(math.log(FLOOR_RAD), hi, POSTERIOR_GRID)
+    out = u, np.exp(-2.0 * u), np.exp(2.0 * u)
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 @dataclass(frozen=True)

@@ -62,13 +62,16 @@ class JointSettings:
     divergence_rms_rad: float
 
     index: Mapping[str, int] = field(init=False, repr=False, compare=False)
+    _keys: Mapping[str, int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "index", {n: i for i, n in enumerate(self.landmarks)})
+        keys = {n: g.landmark_key(i) for n, i in self.index.items()}
+        object.__setattr__(self, "_keys", keys)
 
     def key(self, name: str) -> int:
         """Graph key of landmark ``name``."""
-        return g.landmark_key(self.index[name])
+        return self._keys[name]
 
     def reference_indices(self) -> list[int]:
         """Catalog indices of the reference pair."""
