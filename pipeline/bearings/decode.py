@@ -108,11 +108,34 @@ def _decode_plain_png(data: bytes) -> NDArray[np.uint8] | None:
     if np.any(rows[:, 0] > _FILTER_SUB):
         return None  # UP, AVERAGE, PAETH rows
     sub = rows[:, 0] == _FILTER_SUB
-    rgb = rows[:, 1:].reshape(height, width, 3)
-    if np.any(sub):
+    rgb = rows[:, 1:]
+    if sub.all():
+        rgb = _undo_sub(rgb)
+    elif sub.any():
         rgb = rgb.copy()
-        rgb[sub] = np.cumsum(rgb[sub], axis=1, dtype=np.uint8)  # SUB: running sum mod 256
-    return np.asarray(cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), dtype=np.uint8)
+        rgb[sub] = _undo_sub(rgb[sub])
+    pixels = rgb.reshape(height, width, 3)
+    return np.asarray(cv2.cvtColor(pixels, cv2.COLOR_RGB2BGR), dtype=np.uint8)
+
+
+def _undo_sub(rows: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """RGB bytes (n, 3 W) of rows filtered SUB: each byte plus the same channel's byte on its
+    left, as already restored (a running sum per channel, modulo 256).
+
+    The running sum by doubling: after the pass with shift ``k`` every byte holds the sum of
+    the ``k / 3`` pixels ending at it, so ``log2(W)`` whole-image additions, done on the
+    transposed rows where each shift is one contiguous block (a per-row ``cumsum`` is a scalar
+    loop, 4-5x slower).
+    """
+    done = np.asarray(cv2.transpose(rows), np.uint8)  # (3 W, n): byte columns as rows
+    spare = np.empty_like(done)
+    shift = 3
+    while shift < done.shape[0]:
+        np.add(done[shift:], done[:-shift], out=spare[shift:])
+        spare[:shift] = done[:shift]
+        done, spare = spare, done
+        shift *= 2
+    return np.asarray(cv2.transpose(done), np.uint8)
 
 
 def _chunks(data: bytes) -> list[tuple[bytes, memoryview]] | None:

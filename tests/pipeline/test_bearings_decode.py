@@ -128,7 +128,7 @@ def no_opencv_decoder(monkeypatch: pytest.MonkeyPatch) -> list[int]:
 
 
 @pytest.mark.parametrize("level", [0, 1, 2, 3])
-@pytest.mark.parametrize("shape", [(1, 1), (12, 17), (176, 255)])
+@pytest.mark.parametrize("shape", [(1, 1), (4, 2), (12, 17), (176, 255), (3, 700)])
 def test_recorder_pngs_decode_without_opencv_to_its_pixels(
     level: int, shape: tuple[int, int], no_opencv_decoder: list[int]
 ) -> None:
