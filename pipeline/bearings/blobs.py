@@ -8,6 +8,7 @@ angular extent of the bins it occupies.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -29,7 +30,10 @@ class Blob:
 
 @dataclass(frozen=True)
 class Profile:
-    """Angular profile of a mask: per bin (n_bins,) pixel count and sums of cos/sin bearing."""
+    """Angular profile of a mask: per bin (n_bins,) pixel count and sums of cos/sin bearing.
+
+    The profiles of several masks at once have (K, n_bins) arrays, one row per mask.
+    """
 
     counts: NDArray[np.int64]
     cos_sum: NDArray[np.float64]
@@ -56,6 +60,52 @@ def profile_of_mask(mask: NDArray[np.uint8], value: int, layout: Layout) -> Prof
     return _omni_profile(layout, xy[:, 1], xy[:, 0])
 
 
+def profiles_of_bits(
+    planes: Sequence[NDArray[np.uint8]], slots: Sequence[tuple[int, int]], layout: Layout
+) -> Profile:
+    """Angular profiles of several classes at once: row ``k`` is the profile of the pixels of
+    ``planes[p]`` (crop-sized for omni) with bit ``b`` set, ``(p, b) = slots[k]``.
+
+    The same counts and sums, to the bit, as :func:`profile_of_mask` of each class's mask
+    (each bin's pixels are summed in the same, row-major order).
+    """
+    n = layout.n_bins
+    if isinstance(layout, UnwrappedLayout):
+        counts = np.empty((len(slots), n), np.int64)
+        for k, (p, bit) in enumerate(slots):
+            mask = np.bitwise_and(planes[p], np.uint8(bit))
+            counts[k] = cv2.reduce(mask, 0, cv2.REDUCE_SUM, dtype=cv2.CV_32S)[0] // bit
+        return Profile(
+            counts, counts * layout.bin_cos, counts * layout.bin_sin, layout.bin_width_rad
+        )
+    cells: list[NDArray[np.intp]] = []
+    cos_w: list[NDArray[np.float64]] = []
+    sin_w: list[NDArray[np.float64]] = []
+    for p in sorted({p for p, _ in slots}):
+        ys, xs = np.nonzero(planes[p])  # row-major, as cv2.findNonZero
+        values = planes[p][ys, xs]
+        bins = layout.pixel_bin[ys, xs].astype(np.intp)
+        cos, sin = layout.pixel_cos[ys, xs], layout.pixel_sin[ys, xs]
+        for k, (q, bit) in enumerate(slots):
+            if q == p:
+                on = (values & bit) != 0
+                cells.append(bins[on] + k * n)
+                cos_w.append(cos[on])
+                sin_w.append(sin[on])
+    size = len(slots) * n
+    cell = np.concatenate(cells) if cells else np.zeros(0, np.intp)
+    return Profile(
+        np.bincount(cell, minlength=size).astype(np.int64).reshape(-1, n),
+        np.asarray(np.bincount(cell, np.concatenate([*cos_w, []]), size), np.float64).reshape(
+            -1, n
+        ),
+        np.asarray(np.bincount(cell, np.concatenate([*sin_w, []]), size), np.float64).reshape(
+            -1, n
+        ),
+        layout.bin_width_rad,
+    )
+
+
 def _omni_profile(layout: PixelLayout, ys: NDArray[np.intp], xs: NDArray[np.intp]) -> Profile:
     """Angular profile of the ring pixels at rows ``ys``, columns ``xs`` (crop coordinates)."""
     bins = layout.pixel_bin[ys, xs]
@@ -78,7 +128,7 @@ def profile_blobs(
     Parameters
     ----------
     profile : Profile
-        Angular profile of one class mask.
+        Angular profile of one class mask, (n_bins,) arrays.
     min_pixels : int
         Runs with fewer pixels are not blobs (noise, or a landmark too small to trust).
     max_gap_bins : int
@@ -91,42 +141,75 @@ def profile_blobs(
     largest : int
         Pixel count of the largest run (0 if the mask is empty).
     """
-    occupied = np.flatnonzero(profile.counts)
-    m = occupied.size
-    if m == 0:
-        return [], 0
-    n_bins = profile.counts.size
-    step = np.diff(occupied, append=occupied[0] + n_bins)  # to the next occupied bin, circular
-    ends = np.flatnonzero(step > max_gap_bins + 1)  # index (in occupied) of each run's last bin
-    if ends.size == 0:  # no gap wide enough: one blob, its extent the complement of the widest gap
-        run_id = np.zeros(m, np.intp)
-        widths = np.array([n_bins - int(step.max()) + 1])
-    else:
-        starts = (ends + 1) % m  # index of each run's first bin; run r ends at ends[r]
-        is_start = np.zeros(m, np.intp)
-        is_start[starts] = 1
-        run_id = np.cumsum(is_start) - 1  # runs numbered by their start
-        run_id[run_id < 0] = ends.size - 1  # bins before the first start close the last run
-        widths = np.empty(ends.size, np.intp)
-        run_end = occupied[np.roll(ends, -1)]  # the run starting at starts[r] ends at ends[r+1]
-        widths[run_id[starts]] = (run_end - occupied[starts]) % n_bins + 1
-    n_runs = widths.size
-    n_px = np.bincount(run_id, weights=profile.counts[occupied], minlength=n_runs)
-    largest = int(n_px.max())
+    rows = Profile(
+        profile.counts[None], profile.cos_sum[None], profile.sin_sum[None], profile.bin_width_rad
+    )
+    return profiles_blobs(rows, min_pixels=min_pixels, max_gap_bins=max_gap_bins)[0]
+
+
+def profiles_blobs(
+    profile: Profile, *, min_pixels: int, max_gap_bins: int
+) -> list[tuple[list[Blob], int]]:
+    """:func:`profile_blobs` of each row of (K, n_bins) profiles, all rows in one pass.
+
+    A run ends at an occupied bin whose next occupied bin (circularly, in the same row) is more
+    than ``max_gap_bins + 1`` bins on; the run holding a row's first bins without starting
+    there wraps across the seam and is numbered last. A row with no such gap is one run whose
+    extent is the circle less its widest gap. Ties in size keep the runs' order.
+
+    Returns
+    -------
+    list of (list of Blob, int)
+        Per row: its blobs, largest first, and the pixel count of its largest run (0 if empty).
+    """
+    counts = profile.counts
+    n_rows, n_bins = counts.shape
+    out: list[tuple[list[Blob], int]] = [([], 0) for _ in range(n_rows)]
+    row, occupied = np.nonzero(counts)  # by row, then bin
+    if row.size == 0:
+        return out
+    first = np.flatnonzero(np.r_[True, row[1:] != row[:-1]])  # each row's first occupied bin
+    last = np.r_[first[1:], row.size] - 1
+    segment = np.repeat(np.arange(first.size), last - first + 1)
+    step = np.r_[occupied[1:], 0] - occupied  # to the next occupied bin of the row, circular
+    step[last] = occupied[first] + n_bins - occupied[last]
+    ends = step > max_gap_bins + 1  # the last bin of a run
+    starts = np.r_[False, ends[:-1]]
+    starts[first] = ends[last]
+    one_run = np.add.reduceat(ends, first) == 0  # no gap wide enough in the row
+    starts[first[one_run]] = True
+    opened = np.cumsum(starts)  # runs started so far
+    run = opened - 1
+    before = opened[first] - starts[first]  # runs of the rows before, = the row's first run
+    wraps = opened == before[segment]  # bins before the row's first start: its last run
+    run[wraps] = (opened[last] - 1)[segment[wraps]]
+    n_runs = int(opened[-1])
+    n_px = np.bincount(run, weights=counts[row, occupied], minlength=n_runs)
+    first_bin = np.zeros(n_runs, np.intp)
+    first_bin[run[starts]] = occupied[starts]
+    last_bin = np.zeros(n_runs, np.intp)
+    last_bin[run[ends]] = occupied[ends]
+    width = (last_bin - first_bin) % n_bins + 1
+    widest_gap = np.maximum.reduceat(step, first)
+    width[before[one_run]] = n_bins - widest_gap[one_run] + 1
+    run_row = row[first][np.repeat(np.arange(first.size), np.diff(np.r_[before, n_runs]))]
+    largest = np.maximum.reduceat(n_px, before)
+    for r, size in zip(row[first].tolist(), largest.tolist(), strict=True):
+        out[r] = ([], int(size))
     keep = np.flatnonzero(n_px >= min_pixels)
     if keep.size == 0:
-        return [], largest
-    cos_s = np.bincount(run_id, weights=profile.cos_sum[occupied], minlength=n_runs)
-    sin_s = np.bincount(run_id, weights=profile.sin_sum[occupied], minlength=n_runs)
-    blobs = [
-        Blob(
-            int(n_px[r]),
-            wrap_rad(math.atan2(float(sin_s[r]), float(cos_s[r]))),
-            int(widths[r]) * profile.bin_width_rad,
+        return out
+    cos_s = np.bincount(run, weights=profile.cos_sum[row, occupied], minlength=n_runs)
+    sin_s = np.bincount(run, weights=profile.sin_sum[row, occupied], minlength=n_runs)
+    for r in keep[np.lexsort((keep, -n_px[keep], run_row[keep]))].tolist():
+        out[int(run_row[r])][0].append(
+            Blob(
+                int(n_px[r]),
+                wrap_rad(math.atan2(float(sin_s[r]), float(cos_s[r]))),
+                int(width[r]) * profile.bin_width_rad,
+            )
         )
-        for r in keep[np.argsort(-n_px[keep], kind="stable")]
-    ]
-    return blobs, largest
+    return out
 
 
 def is_fringe(

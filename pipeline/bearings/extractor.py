@@ -25,8 +25,8 @@ from pipeline.bearings.blobs import (
     is_covered,
     is_fringe,
     is_squeezed,
-    profile_blobs,
-    profile_of_mask,
+    profiles_blobs,
+    profiles_of_bits,
 )
 from pipeline.bearings.classify import ClassBit, ColorClassifier
 from pipeline.bearings.color_classes import HsvBox, LandmarkCatalogError, landmark_classes
@@ -269,12 +269,7 @@ class BearingExtractor:
         return {name: by_label[self._class_of[name]] for name in self.names}
 
     def _sightings(self, planes: list[NDArray[np.uint8]]) -> dict[str, ClassSightings]:
-        found = []
-        for cls in self._singles:
-            slot = self._slot(cls.boxes[0])
-            found.append(
-                self._blobs(np.bitwise_and(planes[slot.plane], np.uint8(slot.bit)), slot.bit)
-            )
+        found = self._single_blobs(planes)
         coded: list[tuple[list[Blob], int]] = []
         if self._decoder is not None:
             labels = _labels(planes, self._label_luts)
@@ -350,11 +345,20 @@ class BearingExtractor:
         reach = 0.5 * (code.width_rad - blob.width_rad) + self._layout.bin_width_rad
         return gap <= reach and blob.n_pixels <= code.n_pixels
 
-    def _blobs(self, mask: NDArray[np.uint8], value: int) -> tuple[list[Blob], int]:
+    def _single_blobs(self, planes: list[NDArray[np.uint8]]) -> list[tuple[list[Blob], int]]:
+        """Per single-colour class: its blobs (largest first) and its largest run's pixels."""
+        slots = [self._slot(cls.boxes[0]) for cls in self._singles]
         if self.method == "components":
-            return component_blobs(mask, self._layout, min_pixels=self.min_pixels)
-        profile = profile_of_mask(mask, value, self._layout)
-        return profile_blobs(profile, min_pixels=self.min_pixels, max_gap_bins=self.max_gap_bins)
+            return [
+                component_blobs(
+                    np.bitwise_and(planes[s.plane], np.uint8(s.bit)),
+                    self._layout,
+                    min_pixels=self.min_pixels,
+                )
+                for s in slots
+            ]
+        profiles = profiles_of_bits(planes, [(s.plane, s.bit) for s in slots], self._layout)
+        return profiles_blobs(profiles, min_pixels=self.min_pixels, max_gap_bins=self.max_gap_bins)
 
 
 def _label_luts(slots: list[ClassBit], n_planes: int) -> list[NDArray[np.uint8]]:
