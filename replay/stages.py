@@ -21,6 +21,7 @@ record, with a warning.
 from __future__ import annotations
 
 import contextlib
+import gc
 import logging
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -475,7 +476,14 @@ def run_log(log: LogSource, method: MethodConfig, sinks: Sequence[Sink]) -> None
     """Run one log (a path, or a log already opened or followed) through the stages into ``sinks``.
 
     Each sink's ``finish`` is called, also after an error. A path is opened and closed here.
+
+    Every object alive when the run starts (mostly the libraries' modules, classes and
+    functions: about 70k once Rerun is imported) is moved out of the garbage collector's sight
+    (``gc.freeze``): it lives as long as the process, and each full collection during the run,
+    and the one at exit, would walk it again (measured on 100 movements: 9% of the CPU of
+    ``replay --save``, 2% of ``process``).
     """
+    gc.freeze()
     with contextlib.ExitStack() as stack:
         _run_one(entered(log, stack), method, sinks)
 
