@@ -168,17 +168,23 @@ def profiles_blobs(
     row, occupied = np.nonzero(counts)  # by row, then bin
     if row.size == 0:
         return out
-    first = np.flatnonzero(np.r_[True, row[1:] != row[:-1]])  # each row's first occupied bin
-    last = np.r_[first[1:], row.size] - 1
-    segment = np.repeat(np.arange(first.size), last - first + 1)
-    step = np.r_[occupied[1:], 0] - occupied  # to the next occupied bin of the row, circular
+    m = row.size
+    new_row = np.empty(m, np.bool_)
+    new_row[0] = True
+    np.not_equal(row[1:], row[:-1], out=new_row[1:])
+    first = np.flatnonzero(new_row)  # each row's first occupied bin
+    last = np.concatenate((first[1:], [m])) - 1
+    segment = np.cumsum(new_row, dtype=np.intp) - 1
+    step = np.empty(m, np.intp)  # to the next occupied bin of the row, circular
+    np.subtract(occupied[1:], occupied[:-1], out=step[:-1])
     step[last] = occupied[first] + n_bins - occupied[last]
     ends = step > max_gap_bins + 1  # the last bin of a run
-    starts = np.r_[False, ends[:-1]]
+    starts = np.empty(m, np.bool_)
+    starts[1:] = ends[:-1]
     starts[first] = ends[last]
     one_run = np.add.reduceat(ends, first) == 0  # no gap wide enough in the row
     starts[first[one_run]] = True
-    opened = np.cumsum(starts)  # runs started so far
+    opened = np.cumsum(starts, dtype=np.intp)  # runs started so far
     run = opened - 1
     before = opened[first] - starts[first]  # runs of the rows before, = the row's first run
     wraps = opened == before[segment]  # bins before the row's first start: its last run
@@ -192,7 +198,8 @@ def profiles_blobs(
     width = (last_bin - first_bin) % n_bins + 1
     widest_gap = np.maximum.reduceat(step, first)
     width[before[one_run]] = n_bins - widest_gap[one_run] + 1
-    run_row = row[first][np.repeat(np.arange(first.size), np.diff(np.r_[before, n_runs]))]
+    run_row = np.empty(n_runs, np.intp)
+    run_row[run] = row
     largest = np.maximum.reduceat(n_px, before)
     for r, size in zip(row[first].tolist(), largest.tolist(), strict=True):
         out[r] = ([], int(size))

@@ -159,6 +159,9 @@ class BearingExtractor:
         self._boxes = boxes
         self._classifier = ColorClassifier(boxes)
         self._singles = [c for c in self.classes if not c.coded]
+        self._single_slots = [
+            (slot.plane, slot.bit) for slot in (self._slot(c.boxes[0]) for c in self._singles)
+        ]
         self._coded = [c for c in self.classes if c.coded]
         self._decoder: BandDecoder | None = None
         if self._coded:
@@ -347,17 +350,16 @@ class BearingExtractor:
 
     def _single_blobs(self, planes: list[NDArray[np.uint8]]) -> list[tuple[list[Blob], int]]:
         """Per single-colour class: its blobs (largest first) and its largest run's pixels."""
-        slots = [self._slot(cls.boxes[0]) for cls in self._singles]
         if self.method == "components":
             return [
                 component_blobs(
-                    np.bitwise_and(planes[s.plane], np.uint8(s.bit)),
+                    np.bitwise_and(planes[p], np.uint8(bit)),
                     self._layout,
                     min_pixels=self.min_pixels,
                 )
-                for s in slots
+                for p, bit in self._single_slots
             ]
-        profiles = profiles_of_bits(planes, [(s.plane, s.bit) for s in slots], self._layout)
+        profiles = profiles_of_bits(planes, self._single_slots, self._layout)
         return profiles_blobs(profiles, min_pixels=self.min_pixels, max_gap_bins=self.max_gap_bins)
 
 
