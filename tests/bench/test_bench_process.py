@@ -5,6 +5,8 @@ and ``gtsam``, which the default joint estimator loads when it is made) and read
 message, JSON-decoded), measured in the same run, the two alternated. Goal: process at most 1.5x
 the yardstick;
 ``bslam replay --save`` (Rerun output) at most 1 s in total.
+``test_replay_save_against_process_by_log_length``: ``replay --save`` against ``process`` at 10,
+100 and 400 movements (issue 31: at most 1.5x CPU) and their marginal CPU per movement.
 Run with ``python -m pytest tests/bench/test_bench_process.py``.
 """
 
@@ -127,3 +129,45 @@ def test_replay_with_rerun_output(benchmark: Any, paper_log: Path, tmp_path: Pat
         f"\nreplay --save {RESULTS['replay']:.3f} s in total (goal <= 1 s), "
         f"ratio {ratio:.2f} to the yardstick"
     )
+
+
+def test_replay_save_against_process_by_log_length(
+    tmp_path_factory: pytest.TempPathFactory, benchmark: Any
+) -> None:
+    """``replay --save`` against ``process`` (issue 31: at most 1.5x CPU) at 10, 100 and 400
+    movements (and 1,000 with ``BSLAM_BENCH_LONG=1``): paper-arena PNG logs of
+    ``tests/bench/test_bench_long_logs.py`` (kept in ``$BSLAM_BENCH_CACHE``), whole processes
+    alternated, 5 rounds, CPU medians; then each command's marginal CPU per movement between
+    the two longest logs, whose ratio is where the ratio goes on long logs."""
+    from tests.bench.test_bench_long_logs import BSLAM, _alternated, _log
+
+    folder = os.environ.get("BSLAM_BENCH_CACHE")
+    cache = Path(folder) if folder else tmp_path_factory.mktemp("by_length")
+    cache.mkdir(parents=True, exist_ok=True)
+    lengths = [10, 100, 400] + ([1000] if os.environ.get("BSLAM_BENCH_LONG") else [])
+    cpu: dict[int, tuple[float, float]] = {}
+    for moves in lengths:
+        log = _log(cache, moves, "png")
+        got = _alternated(
+            5,
+            replay=[*BSLAM, "replay", str(log), "--save", str(cache / "by_length.rrd"), "--force"],
+            process=[*BSLAM, "process", str(log), "--summary", str(cache / "s.json"), "--force"],
+        )
+        cpu[moves] = (got["replay"][0], got["process"][0])
+        replay_s, process_s = cpu[moves]
+        print(
+            f"\n{moves} movements: replay --save {replay_s:.2f} s, process {process_s:.2f} s, "
+            f"ratio {replay_s / process_s:.2f} (goal 1.5); load {os.getloadavg()[0]:.1f}"
+        )
+    a, b = lengths[-2], lengths[-1]
+    per_replay = (cpu[b][0] - cpu[a][0]) / (b - a)
+    per_process = (cpu[b][1] - cpu[a][1]) / (b - a)
+    print(
+        f"per movement ({a} -> {b}): replay --save {1e3 * per_replay:.1f} ms, process "
+        f"{1e3 * per_process:.1f} ms, ratio {per_replay / per_process:.2f}"
+    )
+    benchmark.extra_info.update(
+        {f"ratio_{m}": r / p for m, (r, p) in cpu.items()},
+        marginal_ratio=per_replay / per_process,
+    )
+    benchmark.pedantic(lambda: None, rounds=1, iterations=1)
