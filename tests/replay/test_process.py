@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import math
 import os
 import subprocess
 import sys
+import weakref
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +25,8 @@ from replay.cli import cli
 from replay.parallel import SchedulerError, run_tasks
 from replay.process import process_log
 from replay.records import MethodConfig
+from replay.sinks.summary import SummarySink
+from replay.stages import run_log
 
 
 def _check_contract(doc: dict[str, Any], n_movements: int) -> None:
@@ -352,3 +356,22 @@ def test_the_typed_summary_agrees_with_its_document(small_log: Path) -> None:
     assert result.association is None and "association" not in doc
     # plain data: it comes back whole from a worker process (a pool, Dask)
     assert pickle.loads(pickle.dumps(result)) == result
+
+
+def test_a_run_hands_every_object_back_to_the_garbage_collector(small_log: Path) -> None:
+    """``run_log`` freezes the heap for the run only: a cycle dropped after it is collected."""
+
+    class Node:
+        other: object = None
+
+    first, second = Node(), Node()
+    first.other, second.other = second, first  # a cycle: only the collector frees it
+    alive = weakref.ref(first)
+    frozen_before = gc.get_freeze_count()
+    sink = SummarySink()
+    run_log(small_log, MethodConfig(), [sink])
+    assert sink.document["movements"], "the run did not happen"
+    assert gc.get_freeze_count() == frozen_before
+    del first, second
+    gc.collect()
+    assert alive() is None
