@@ -8,7 +8,7 @@ ellipse per landmark, FL). ``gtsam`` is imported only when the joint estimator i
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
@@ -64,6 +64,10 @@ class AssociatingEstimator(Estimator, Protocol):
 
     def settle(self) -> list[str]:
         """Enter the landmarks whose bearings wait and update the map; their names."""
+
+    def rebear(self, bearings: Mapping[str, Sequence[tuple[int, int, float]]]) -> None:
+        """Give landmarks in the map exactly ``bearings`` (name -> ``(movement, end,
+        bearing_rad)``) in place of theirs and solve the map again."""
 
 
 def associating(estimator: Estimator) -> AssociatingEstimator:

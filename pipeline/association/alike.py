@@ -12,11 +12,11 @@ named now (:meth:`pipeline.joint.JointSlam.add_history`). Once the log is proces
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from data_schemas.session import Session, shared_classes
-from pipeline.association.final import FinalDetection, weak_names
+from pipeline.association.final import FinalDetection, Status, weak_names
 from pipeline.association.result import MovementAssociation
 from pipeline.association.tracker import Associator
 from pipeline.bearings import Detection, camera_view_rad
@@ -31,6 +31,13 @@ Poses = dict[tuple[int, int], KeyframePose]
 #: a name given frees the detections it explains, and those left may then point at another
 #: landmark.
 REPAIR_ROUNDS = 3
+#: Once repaired, each name's bearings in the map are replaced by the detections the final
+#: association gives it and the map is solved again, until the association no longer changes or
+#: this many times (alternating association and estimation).
+RESOLVE_ROUNDS = 6
+#: A name is given its final association's detections only when they are at least this many
+#: (fewer may not place it; it keeps the bearings it was named and associated with).
+RESOLVE_MIN_BEARINGS = 8
 
 
 class AlikeLandmarks:
@@ -50,6 +57,8 @@ class AlikeLandmarks:
         #: ... and its bearings of landmarks of a class of their own: (movement, end) -> name ->
         #: bearing
         self.keyframe_unique: dict[tuple[int, int], dict[str, float]] = {}
+        #: the bearings the estimator was given of each name: (movement, end, bearing_rad)
+        self.given: dict[str, set[tuple[int, int, float]]] = {}
 
     def landmarks(self, catalog: Sequence[str]) -> list[str]:
         """What the estimator maps: catalog landmarks of their own class, then ``red#k`` names."""
@@ -86,6 +95,9 @@ class AlikeLandmarks:
         assoc = self.associator.associate(
             index, (unique[0], unique[1]), (blobs[0], blobs[1]), estimator.estimates
         )
+        for end, named in enumerate((assoc.bearings_o1_rad, assoc.bearings_o2_rad)):
+            for name, b in named.items():
+                self.given.setdefault(name, set()).add((index, end, b))
         obs = MovementObservation(
             index,
             {**unique[0], **assoc.bearings_o1_rad},
@@ -104,10 +116,21 @@ class AlikeLandmarks:
         self.associator.hypothesize(
             assoc, pose, estimator.estimates, trajectory, estimator.bearing_scatter
         )
-        for name in assoc.retracted:
+        self._give(assoc.retracted, assoc.history, estimator)
+
+    def _give(
+        self,
+        forgotten: Iterable[str],
+        history: Mapping[str, Sequence[tuple[int, int, float]]],
+        estimator: AssociatingEstimator,
+    ) -> None:
+        """The estimator forgets the ``forgotten`` names and takes ``history`` as bearings."""
+        for name in forgotten:
             estimator.forget(name)
-        for name, bearings in assoc.history.items():
+            self.given.pop(name, None)
+        for name, bearings in history.items():
             estimator.add_history(name, bearings)
+            self.given.setdefault(name, set()).update(bearings)
 
     def final(self, estimator: AssociatingEstimator) -> FinalAssociation:
         """Every keyframe's detections associated with ``estimator``'s final map and what it
@@ -135,18 +158,26 @@ class AlikeLandmarks:
         last = max((m for m, _ in self.keyframe_blobs), default=-1)
         retracted: dict[str, str] = {}
         named_at_end: dict[str, str] = {}
-        for _ in range(REPAIR_ROUNDS):
-            repair = self.associator.repair_final(detections, poses, estimator.estimates, last)
-            if repair is None:
+        repairs = 0
+        for _ in range(RESOLVE_ROUNDS):
+            anew = self._reassigned(detections, set(placed))
+            if anew:  # each name's bearings: its detections with the final map; solved again
+                estimator.rebear(anew)
+                for name, rays in anew.items():
+                    self.given[name] = set(rays)
+                detections, reports, poses, placed = associate()
+            repair = None
+            if repairs < REPAIR_ROUNDS:
+                repair = self.associator.repair_final(detections, poses, estimator.estimates, last)
+            if repair is not None:
+                repairs += 1
+                self._give(repair.retracted, repair.history, estimator)
+                estimator.settle()
+                retracted.update(repair.retracted)
+                named_at_end.update(repair.named_at_end)
+                detections, reports, poses, placed = associate()
+            elif not anew:
                 break
-            for name in repair.retracted:
-                estimator.forget(name)
-            for name, bearings in repair.history.items():
-                estimator.add_history(name, bearings)
-            estimator.settle()
-            retracted.update(repair.retracted)
-            named_at_end.update(repair.named_at_end)
-            detections, reports, poses, placed = associate()
         noise = estimator.noise
         weak = weak_names(
             detections,
@@ -157,6 +188,23 @@ class AlikeLandmarks:
             eps_rad=self.associator.model.eps_rad,
         )
         return FinalAssociation(detections, reports, retracted, placed, named_at_end, weak)
+
+    def _reassigned(
+        self, detections: Sequence[FinalDetection], left_out: set[int]
+    ) -> dict[str, list[tuple[int, int, float]]]:
+        """The names whose detections with the final map (at keyframes the map holds, at least
+        :data:`RESOLVE_MIN_BEARINGS`) are not the bearings the estimator was given: name ->
+        those detections ``(movement, end, bearing_rad)``."""
+        found: dict[str, list[tuple[int, int, float]]] = {}
+        for d in detections:
+            if d.name is not None and d.status == Status.NAMED and d.movement not in left_out:
+                found.setdefault(d.name, []).append((d.movement, d.end, d.bearing_rad))
+        return {
+            name: rays
+            for name, rays in found.items()
+            if len(rays) >= RESOLVE_MIN_BEARINGS
+            and set(rays) != self.given.get(name, set())
+        }
 
 
 @dataclass(frozen=True)

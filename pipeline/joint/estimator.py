@@ -279,6 +279,29 @@ class JointSlam:
             if movement in self._state.placed:  # a waiting movement brings it when placed
                 self._state.pending.setdefault(name, []).append(bearing)
 
+    def rebear(self, bearings: Mapping[str, Sequence[tuple[int, int, float]]]) -> None:
+        """Give each landmark of ``bearings`` (in the graph) exactly these bearings
+        ``(movement, end, bearing_rad)`` of the placed movements in place of the ones it had
+        there (once the log is processed, association with the final map found them), and
+        solve the map again from its current values (one rebuild: the landmarks keep their
+        points as initial values, so a landmark that holds keyframes in place is never taken
+        out). Landmarks not in the graph, and other movements' bearings, are ignored."""
+        names = {n for n in bearings if n in self._state.in_graph}
+        if not names or not self._state.placed:
+            return
+        for m in self._state.placed.values():
+            m.bearings[:] = [b for b in m.bearings if b.landmark not in names]
+        self._state.rejected = {b for b in self._state.rejected if b.landmark not in names}
+        for name in sorted(names):
+            for movement, end, b in bearings[name]:
+                placed = self._state.placed.get(movement)
+                if placed is not None and math.isfinite(b):
+                    placed.bearings.append(g.Bearing(movement, end, name, float(b)))
+        self._map.retable(self._state)
+        self._map.rebuild(self._state, gtsam.Values(self._map.values))
+        robustness.reject_outliers(self._state, self._map)
+        self._map.update_estimates(self._state)
+
     def settle(self) -> list[str]:
         """Enter the landmarks whose bearings wait (given by :meth:`add_history` after the
         last movement) and update the map, without a movement; their names."""
