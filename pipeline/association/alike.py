@@ -202,8 +202,7 @@ class AlikeLandmarks:
         return {
             name: rays
             for name, rays in found.items()
-            if len(rays) >= RESOLVE_MIN_BEARINGS
-            and set(rays) != self.given.get(name, set())
+            if len(rays) >= RESOLVE_MIN_BEARINGS and set(rays) != self.given.get(name, set())
         }
 
 
