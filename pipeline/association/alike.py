@@ -7,7 +7,8 @@ estimator has placed the movement lets the associator grow its hypotheses, makes
 forget the landmarks whose names were taken back, and hands it the earlier bearings of landmarks
 named now (:meth:`pipeline.joint.JointSlam.add_history`). Once the log is processed,
 :meth:`final` associates every keyframe's detections again with the final map
-(:func:`pipeline.association.final.associate_final`).
+(:func:`pipeline.association.final.associate_final`) and gives the names those bearings, in
+turn with solving the map again, until the two agree.
 """
 
 from __future__ import annotations
@@ -31,9 +32,9 @@ Poses = dict[tuple[int, int], KeyframePose]
 #: a name given frees the detections it explains, and those left may then point at another
 #: landmark.
 REPAIR_ROUNDS = 3
-#: Once repaired, each name's bearings in the map are replaced by the detections the final
-#: association gives it and the map is solved again, until the association no longer changes or
-#: this many times (alternating association and estimation).
+#: Once the log is processed, each name's bearings in the map are replaced by the detections the
+#: final association gives it, the map is solved again and repaired, in rounds until neither
+#: changes anything, at most this many rounds (association and estimation in turn).
 RESOLVE_ROUNDS = 6
 #: A name is given its final association's detections only when they are at least this many
 #: (fewer may not place it; it keeps the bearings it was named and associated with).
@@ -134,12 +135,16 @@ class AlikeLandmarks:
 
     def final(self, estimator: AssociatingEstimator) -> FinalAssociation:
         """Every keyframe's detections associated with ``estimator``'s final map and what it
-        leaves open per class; when the unexplained ones point at a landmark, a free name of
-        its class is given to it, or with every name given a doubtful one is retracted and
-        given to it, or names under suspicion are given anew where their detections and those
-        meet (:meth:`pipeline.association.Associator.repair_final`), the estimator settles
-        (:meth:`pipeline.joint.JointSlam.settle`) and the association is made again, up to
-        :data:`REPAIR_ROUNDS` times."""
+        leaves open per class, association and map made to agree: in turn, each name's
+        bearings in the map become its detections with the final map and the map is solved
+        again (:meth:`pipeline.joint.JointSlam.rebear`), and when the unexplained detections
+        point at a landmark, a free name of its class is given to it, or with every name given
+        a doubtful one is retracted and given to it, or names under suspicion are given anew
+        where their detections and those meet
+        (:meth:`pipeline.association.Associator.repair_final`; the estimator settles,
+        :meth:`pipeline.joint.JointSlam.settle`); each followed by the association made again,
+        until neither changes anything (at most :data:`RESOLVE_ROUNDS` rounds,
+        :data:`REPAIR_ROUNDS` repairs)."""
 
         def associate() -> tuple[list[FinalDetection], dict[str, str], Poses, list[int]]:
             poses: Poses = estimator.keyframe_poses()
