@@ -17,8 +17,9 @@ from replay.process import result_line
 @pytest.mark.slow  # two simulated 30-movement runs, about 30 s each
 @pytest.mark.parametrize(
     ("n", "size_m", "camera", "seed"),
-    [(12, (4.0, 3.0), "unwrapped", 0), (16, (5.0, 4.0), "omni", 0)],
-    ids=["12-in-4x3-unwrapped", "16-in-5x4-omni"],
+    # runs whose final map, association and map made to agree, still puts a name 1.2-1.8 m off
+    [(12, (4.0, 3.0), "omni", 1), (16, (5.0, 4.0), "unwrapped", 1)],
+    ids=["12-in-4x3-omni", "16-in-5x4-unwrapped"],
 )
 def test_every_name_more_than_10_cm_off_is_flagged_by_name(
     n: int, size_m: tuple[float, float], camera: str, seed: int, tmp_path: Path
