@@ -477,7 +477,9 @@ def repair_final(
                     (n for n in names.named[label] if names.support[n].doubt() is not None),
                     key=lambda n: _final_share(n, final, poses, mapped, names.model),
                 )
-                names.give_name(label, h, lines, out, searched=True, retract=weakest)
+                # the name moves only to a point that explains more detections than it does
+                if len(h.rays) > sum(d.name == weakest for d in final):
+                    names.give_name(label, h, lines, out, searched=True, retract=weakest)
                 break
             names.give_name(label, h, lines, out, searched=True)
             x, y = h.point_fl
