@@ -375,3 +375,40 @@ def test_a_run_hands_every_object_back_to_the_garbage_collector(small_log: Path)
     del first, second
     gc.collect()
     assert alive() is None
+
+
+_EXIT_SCRIPT = """
+import sys
+
+
+class Noisy:
+    def __del__(self):
+        sys.stdout.write("finalized at exit")
+
+
+kept = Noisy()
+kept.me = kept  # a cycle, alive until the interpreter tears __main__ down
+if sys.argv[1] == "run":
+    from replay.process import process_log
+    from replay.records import MethodConfig
+
+    process_log(sys.argv[2], MethodConfig())
+"""
+
+
+def test_after_a_run_the_last_collection_at_exit_is_skipped(small_log: Path) -> None:
+    """A process that ran a log freezes its heap at exit: Python's final collection, which
+    would walk every object only to free memory the system takes back, finds nothing to do;
+    a reference cycle alive at exit is not finalized (without a run, it is)."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    outputs = {}
+    for mode in ("run", "none"):
+        done = subprocess.run(
+            [sys.executable, "-c", _EXIT_SCRIPT, mode, str(small_log)],
+            env=env,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        outputs[mode] = done.stdout
+    assert outputs == {"run": "", "none": "finalized at exit"}
