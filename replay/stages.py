@@ -20,9 +20,7 @@ record, with a warning.
 
 from __future__ import annotations
 
-import atexit
 import contextlib
-import functools
 import gc
 import logging
 from collections.abc import Collection, Mapping, Sequence
@@ -483,30 +481,14 @@ def run_log(log: LogSource, method: MethodConfig, sinks: Sequence[Sink]) -> None
     functions: about 70k once Rerun is imported) is moved out of the garbage collector's sight
     (``gc.freeze``) for the run, so that the full collections during the run do not walk it
     again. They are handed back to the collector when the run ends, so a process that runs
-    many logs (tests, batch) leaks nothing that dies between runs. At the process's exit the
-    heap is frozen again (:func:`_no_collection_at_exit`).
+    many logs (tests, batch) leaks nothing that dies between runs.
     """
-    _no_collection_at_exit()
     gc.freeze()
     try:
         with contextlib.ExitStack() as stack:
             _run_one(entered(log, stack), method, sinks)
     finally:
         gc.unfreeze()
-
-
-@functools.cache
-def _no_collection_at_exit() -> None:
-    """Freeze the heap when the process exits (registered once, by the first run).
-
-    Python's last full collection, after the exit handlers, walks every object still alive
-    (about 100k after a replay) only to free memory the operating system takes back anyway:
-    0.2 s of CPU after ``replay --save`` of 100 movements (8%), 0.04 s after ``process``.
-    Frozen, the objects are still released by the modules' teardown; only reference cycles
-    alive at exit are left to the operating system, their finalizers not run (Python does not
-    promise those at exit; every output here is closed before its command returns).
-    """
-    atexit.register(gc.freeze)
 
 
 def driving_log(topics: Collection[str] | None, session: Session) -> bool:
