@@ -8,6 +8,7 @@ With a distance prior, one more variable: the map's scale, ``log`` of FL units p
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -81,9 +82,23 @@ class Bearing:
     bearing_rad: float
 
 
+@functools.lru_cache(maxsize=32)
+def _isotropic(dim: int, sigma: float) -> gtsam.noiseModel.Isotropic:
+    """An isotropic noise model (made once per dimension and std: models are immutable)."""
+    return gtsam.noiseModel.Isotropic.Sigma(dim, sigma)
+
+
+@functools.lru_cache(maxsize=32)
+def _diagonal(sigmas: tuple[float, ...]) -> gtsam.noiseModel.Diagonal:
+    """A diagonal noise model (made once per set of stds)."""
+    return gtsam.noiseModel.Diagonal.Sigmas(np.array(sigmas))
+
+
+@functools.lru_cache(maxsize=32)
 def bearing_noise(sigma_rad: float, robust: bool = True) -> gtsam.noiseModel.Base:
-    """Isotropic bearing noise of std ``sigma_rad``, under a Huber loss unless ``robust`` is off."""
-    base = gtsam.noiseModel.Isotropic.Sigma(1, sigma_rad)
+    """Isotropic noise of std ``sigma_rad`` on one scalar error (a bearing's, or a length's),
+    under a Huber loss unless ``robust`` is off (made once per std)."""
+    base = _isotropic(1, sigma_rad)
     if not robust:
         return base
     return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(HUBER_K), base)
@@ -102,7 +117,7 @@ def straight_factor(
     """O2 is ahead of O1 along O1's x axis with the same heading; length free unless given."""
     if length_fl is None:
         length_fl, length_sigma_fl = 1.0, FREE_LENGTH_SIGMA_FL
-    noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([length_sigma_fl, *STRAIGHT_SIGMA]))
+    noise = _diagonal((length_sigma_fl, *STRAIGHT_SIGMA))
     return gtsam.BetweenFactorPose2(o1, o2, gtsam.Pose2(length_fl, 0.0, 0.0), noise)
 
 
@@ -111,9 +126,7 @@ def in_place_factor(
 ) -> gtsam.NonlinearFactor:
     """The robot turns in place: same position; the turn is free unless ``turn_rad`` is given."""
     sigma_turn = WEAK_SIGMA if turn_rad is None else turn_sigma_rad
-    noise = gtsam.noiseModel.Diagonal.Sigmas(
-        np.array([IN_PLACE_SIGMA_FL, IN_PLACE_SIGMA_FL, sigma_turn])
-    )
+    noise = _diagonal((IN_PLACE_SIGMA_FL, IN_PLACE_SIGMA_FL, sigma_turn))
     return gtsam.BetweenFactorPose2(o2_prev, o1_next, gtsam.Pose2(0.0, 0.0, turn_rad or 0.0), noise)
 
 
@@ -128,12 +141,12 @@ def gauge_factors(l1: int, l2: int) -> list[gtsam.NonlinearFactor]:
 
 def weak_point_prior(key: int, point_fl: NDArray[np.float64]) -> gtsam.NonlinearFactor:
     """A very wide prior at a landmark's initial value (keeps the system determined)."""
-    return gtsam.PriorFactorPoint2(key, point_fl, gtsam.noiseModel.Isotropic.Sigma(2, WEAK_SIGMA))
+    return gtsam.PriorFactorPoint2(key, point_fl, _isotropic(2, WEAK_SIGMA))
 
 
 def weak_pose_prior(key: int, pose: gtsam.Pose2) -> gtsam.NonlinearFactor:
     """A very wide prior at a keyframe's initial value (keeps the system determined)."""
-    return gtsam.PriorFactorPose2(key, pose, gtsam.noiseModel.Isotropic.Sigma(3, WEAK_SIGMA))
+    return gtsam.PriorFactorPose2(key, pose, _isotropic(3, WEAK_SIGMA))
 
 
 def distance_factor(
@@ -160,20 +173,12 @@ def distance_factor(
             jac[2] = np.array([[-1.0]])
         return np.array([0.5 * math.log(length2) - log_scale - log_d])
 
-    base = gtsam.noiseModel.Isotropic.Sigma(1, rel_sigma)
-    noise = (
-        gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(HUBER_K), base)
-        if robust
-        else base
-    )
-    return gtsam.CustomFactor(noise, [o1, o2, SCALE_KEY], error)
+    return gtsam.CustomFactor(bearing_noise(rel_sigma, robust), [o1, o2, SCALE_KEY], error)
 
 
 def weak_scale_prior(log_scale: float) -> gtsam.NonlinearFactor:
     """A very wide prior at the scale's initial value (keeps the system determined)."""
-    return gtsam.PriorFactorVector(
-        SCALE_KEY, np.array([log_scale]), gtsam.noiseModel.Isotropic.Sigma(1, WEAK_SIGMA)
-    )
+    return gtsam.PriorFactorVector(SCALE_KEY, np.array([log_scale]), _isotropic(1, WEAK_SIGMA))
 
 
 #: Iterations of a batch Levenberg-Marquardt solve (:func:`solve_batch`).

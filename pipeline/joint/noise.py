@@ -38,7 +38,18 @@ POSTERIOR_GRID = 2000
 def robust_std(residuals_rad: NDArray[np.float64]) -> float:
     """Robust standard deviation of residuals (k,): 1.4826 x their median absolute value (the
     std of a Gaussian with that median; wrong detections barely move it)."""
-    return 1.4826 * float(np.median(np.abs(residuals_rad)))
+    a = np.abs(residuals_rad)
+    if a.size == 0:
+        return 1.4826 * float(np.median(a))  # nan, as numpy's median says
+    # numpy's median without its wrapping: the middle one or two of a partition (and the
+    # largest, which is nan when any is)
+    half = a.size // 2
+    middle = (half,) if a.size % 2 else (half - 1, half)
+    part = np.partition(a, (*middle, -1))
+    if np.isnan(part[-1]):
+        return math.nan
+    mid = part[half] if a.size % 2 else (part[half - 1] + part[half]) / 2
+    return 1.4826 * float(mid)
 
 
 def robust_rms(residuals_rad: NDArray[np.float64]) -> float:
