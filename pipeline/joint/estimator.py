@@ -35,7 +35,6 @@ from dataclasses import replace
 import gtsam
 import numpy as np
 
-from data_schemas.angles import wrap_rad
 from data_schemas.errors import EstimationError
 from pipeline.crb import truncated_gaussian_std
 from pipeline.estimate import LandmarkEstimate
@@ -452,16 +451,13 @@ class JointSlam:
         return res
 
     def _movement_residuals(self, m: Movement) -> dict[str, tuple[float | None, float | None]]:
-        """Bearing residuals (rad) of one placed movement, per landmark in the graph."""
+        """Bearing residuals (rad) of one placed movement, per landmark in the graph: its rows
+        of the bearing table at the map as it is (each at its own keyframe)."""
+        table, r = self._map.table, self._map.residuals()
         out: dict[str, list[float | None]] = {}
-        mp = self._map.movement_pose(m.index)
-        for b in m.bearings:
-            if b.landmark not in self._state.in_graph:
-                continue
-            o = mp.o1_fl if b.end == 0 else mp.o2_fl
-            pt = self._map.point(b.landmark)
-            pred = math.atan2(pt[1] - o[1], pt[0] - o[0]) - mp.heading_rad
-            out.setdefault(b.landmark, [None, None])[b.end] = float(wrap_rad(b.bearing_rad - pred))
+        for i in np.flatnonzero(table.slot // 2 == m.index):
+            b = table.rows[i]
+            out.setdefault(b.landmark, [None, None])[b.end] = float(r[i])
         return {
             n: (v[0], v[1]) for n, v in sorted(out.items(), key=lambda kv: self._lm_index[kv[0]])
         }

@@ -36,12 +36,15 @@ TIGHT_BELIEF_FL = 0.1
 RETUNE_RATIO = 1.5
 #: ... with at least this many degrees of freedom.
 RETUNE_DOF = 10
-#: Up to this many movements the map is solved carefully: Powell's dogleg steps, relinearization
+#: Up to this many movements the map is solved carefully: Powell's dogleg steps, QR, relinearization
 #: threshold 1e-3 and one more step after every update (a Gauss-Newton step from the bootstrap's
 #: optimum along a barely determined direction can throw the map away); from then on, with the
-#: map determined, plain Gauss-Newton steps relinearized per variable, whose cost per movement
-#: does not grow with the dogleg's steps over the whole tree.
+#: map determined, plain Gauss-Newton steps (Cholesky) relinearized per variable, whose cost per
+#: movement does not grow with the dogleg's steps over the whole tree.
 CAREFUL_MOVEMENTS = 50
+#: After the careful movements, iSAM2 looks for variables to relinearize at every this many
+#: updates (GTSAM's default; every update: twice the cost of the update, no gain in accuracy).
+RELINEARIZE_SKIP = 10
 
 
 def pose2s(pose: MovementPose) -> tuple[gtsam.Pose2, gtsam.Pose2]:
@@ -95,11 +98,12 @@ class MapGraph:
         self.careful = n_placed < CAREFUL_MOVEMENTS
         params = gtsam.ISAM2Params()
         params.relinearizeSkip = 1
-        params.setFactorization("QR")
         if self.careful:
+            params.setFactorization("QR")
             params.setRelinearizeThreshold(1e-3)
             params.setOptimizationParams(gtsam.ISAM2DoglegParams())
-        else:
+        else:  # GTSAM's default factorization (Cholesky) and relinearization check
+            params.relinearizeSkip = RELINEARIZE_SKIP
             params.setRelinearizeThreshold(g.relinearize_thresholds())
             params.enablePartialRelinearizationCheck = True
             params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams())
