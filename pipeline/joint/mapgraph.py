@@ -90,6 +90,8 @@ class MapGraph:
         self.isam = self.new_isam(0)
         # iSAM2's estimate of every variable, computed when first asked after an update
         self._estimate: gtsam.Values | None = gtsam.Values()
+        # landmark positions read from an estimate (that estimate, by name)
+        self._points: tuple[gtsam.Values | None, dict[str, NDArray[np.float64]]] = (None, {})
 
     # ------------------------------------------------------------------ iSAM2 and values
     def new_isam(self, n_placed: int) -> gtsam.ISAM2:
@@ -126,10 +128,15 @@ class MapGraph:
         return self.settings.key(name)
 
     def point(self, name: str) -> NDArray[np.float64]:
-        """Position (2,) FL of a landmark in the graph."""
+        """Position (2,) FL of a landmark in the graph (a new array)."""
         if self._estimate is None:  # one variable, not the whole map
             return np.asarray(self.isam.calculateEstimatePoint2(self.key(name)), np.float64)
-        return np.asarray(self.values.atPoint2(self.key(name)), np.float64)
+        if self._points[0] is not self._estimate:  # read once per estimate and landmark
+            self._points = (self._estimate, {})
+        memo = self._points[1]
+        if name not in memo:
+            memo[name] = np.asarray(self._estimate.atPoint2(self.key(name)), np.float64)
+        return memo[name].copy()
 
     def has(self, key: int) -> bool:
         """Whether variable ``key`` is in the graph."""
