@@ -1,12 +1,17 @@
 """Calibration of the joint map per arena family, on real simulated logs (images, bearing
 extraction, the joint estimator): the 80% regions hold the truth about 80% of the time in every
-family (replay/experiments/families.py), fixed seeds, at least 40 regions per family.
+family (replay/experiments/families.py), fixed seeds, about 100 regions per family.
 
 The band is two binomial standard deviations of a share of 0.8 at the family's number of
-regions (about +-0.13 at 40): a family whose regions are as calibrated as the goal asks
-(75-85%, measured over more seeds in docs/RESULTS.md) passes, one whose regions hold the truth
-two thirds of the time or 95% of the time does not. And no landmark confidently wrong: the truth
-within each landmark's 99.99% region.
+regions (about +-0.08 at 100): a family whose regions are about as calibrated as the goal
+asks (75-85%; docs/RESULTS.md measures each family on 240-360 regions of fresh seeds, 73-82%)
+passes, one whose regions hold the truth two thirds of the time or 95% of the time does not.
+Regions of one run share its keyframes, so a set of 40 regions from 20 runs strays by more than
+its binomial std (the random family read 66% on 38 regions, 74% on 88, 80% on 177). And no
+landmark confidently wrong: the truth within each landmark's 99.99% region.
+
+The families are split over two classes so that two test workers share them (pytest-xdist
+gives each class its own worker).
 """
 
 from __future__ import annotations
@@ -20,18 +25,17 @@ import pytest
 from replay.experiments.calibration import LandmarkScore, coverage, score_run
 from replay.experiments.families import FAMILIES
 
-#: Runs per family: at least 40 regions (the paper's arena scores two landmarks a run).
+#: Runs per family, about 100 regions each: the paper's arena and the wide sparse one score
+#: two landmarks a run, the random ones about three, the corridor four, close pairs and coded six.
 SEEDS = {
-    "paper": range(20),
-    "paper_noise_free": range(20),
-    "noise_free": range(16),
-    "long": range(10),
-    "close_pairs": range(7),
-    "coded": range(7),
-    "wide_sparse": range(20),
-    # 3 regions a run: seeds 0-13 alone read 66% of 38 (regions of one run are not
-    # independent), 0-29 74% of 88; 60 fresh runs 80% (docs/RESULTS.md)
-    "varied": range(30),
+    "paper": range(50),
+    "paper_noise_free": range(50),
+    "noise_free": range(34),
+    "varied": range(34),
+    "long": range(25),
+    "close_pairs": range(17),
+    "coded": range(17),
+    "wide_sparse": range(50),
 }
 
 
@@ -40,40 +44,61 @@ def _scores(family: str) -> list[LandmarkScore]:
     return [s for seed in SEEDS[family] for s in score_run(family, seed)]
 
 
-def test_every_family_is_measured() -> None:
-    assert set(SEEDS) == set(FAMILIES)
+def test_every_family_is_measured_once() -> None:
+    split = [*TestSmallArenas.families, *TestLargeArenas.families]
+    assert sorted(split) == sorted(SEEDS) == sorted(FAMILIES)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("family", FAMILIES)
-def test_80_percent_regions_hold_the_truth_80_percent_of_the_time(family: str) -> None:
-    scores = _scores(family)
-    n = len(scores)
-    assert n >= 40
-    band = 2.0 * math.sqrt(0.8 * 0.2 / n)
-    assert abs(coverage(scores) - 0.8) <= band, (coverage(scores), n)
-    assert np.all(np.isfinite([s.error_cm for s in scores]))
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    if "family" in metafunc.fixturenames and metafunc.cls is not None:
+        metafunc.parametrize("family", metafunc.cls.families)
 
 
-#: Families with a known confidently wrong landmark on these seeds (open: issue 32's note).
-#: close_pairs seed 5: L8 (coded, 6-10 cm from L7) ends 1.65 m off with a region that puts the
-#: truth at a squared Mahalanobis distance of about 29,000; batch least squares on the same
-#: bearings is 1.40 m off, so its bearings themselves point elsewhere (a wrong detection the map
-#: trusts).
-CONFIDENTLY_WRONG = {"close_pairs"}
+#: Landmarks known to lie beyond their 99.99% region on these seeds (a strict expected failure
+#: each): family -> (seed, name, squared Mahalanobis distance, error cm, batch least squares cm).
+#: Batch least squares on the same bearings is as far off each time: the bearings point there.
+#: The paper's arena: chi2(2) puts 4e-5 beyond d^2 20, one such among 100 regions is a tail
+#: event or a detection error. No added noise: the extraction's errors are heavier-tailed than
+#: a Gaussian (docs/RESULTS.md: 5 of 296 fresh regions beyond 99.99%). Close pairs: L8 (coded,
+#: 6-10 cm from L7) 1.65 m off, a wrong detection beside its neighbour that the map trusts.
+CONFIDENTLY_WRONG = {
+    "paper": (28, "L4", 20.1, 3.93, 4.01),
+    "noise_free": (26, "L3", 36.1, 2.66, 2.67),
+    "close_pairs": (5, "L8", 29072.0, 165.0, 140.0),
+}
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    "family",
-    [
-        pytest.param(f, marks=pytest.mark.xfail(strict=True, reason="a confidently wrong landmark"))
-        if f in CONFIDENTLY_WRONG
-        else f
-        for f in FAMILIES
-    ],
-)
-def test_no_landmark_is_confidently_wrong(family: str) -> None:
-    # the truth within the 99.99% region of every landmark (chi2(2) 18.4)
-    d2 = sorted(s.d2 for s in _scores(family))
-    assert d2[-1] <= -2.0 * math.log(1e-4), d2[-3:]
+class _Calibration:
+    families: tuple[str, ...] = ()
+
+    @pytest.mark.slow
+    def test_80_percent_regions_hold_the_truth_80_percent_of_the_time(self, family: str) -> None:
+        scores = _scores(family)
+        n = len(scores)
+        assert n >= 90
+        band = 2.0 * math.sqrt(0.8 * 0.2 / n)
+        assert abs(coverage(scores) - 0.8) <= band, (coverage(scores), n)
+        assert np.all(np.isfinite([s.error_cm for s in scores]))
+
+    @pytest.mark.slow
+    def test_no_landmark_is_confidently_wrong(
+        self, family: str, request: pytest.FixtureRequest
+    ) -> None:
+        if family in CONFIDENTLY_WRONG:
+            why = f"known: seed, name, d^2, error cm, LS cm = {CONFIDENTLY_WRONG[family]}"
+            request.applymarker(pytest.mark.xfail(strict=True, reason=why))
+        # the truth within the 99.99% region of every landmark (chi2(2) 18.4)
+        worst = max(_scores(family), key=lambda s: s.d2)
+        assert worst.d2 <= -2.0 * math.log(1e-4), worst
+
+
+class TestSmallArenas(_Calibration):
+    """The paper's arena and the random arenas."""
+
+    families = ("paper", "paper_noise_free", "noise_free", "varied")
+
+
+class TestLargeArenas(_Calibration):
+    """The corridor, close pairs, coded and wide sparse arenas."""
+
+    families = ("long", "close_pairs", "coded", "wide_sparse")
