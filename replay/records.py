@@ -299,7 +299,8 @@ class AssociationRecord:
         back once the log was processed and given anew where the final map's unexplained
         detections point, with why.
     estimates : dict name -> EstimateRecord, or None
-        The map after that or after ``named_at_end`` (None: the last movement's map stands).
+        The map once the log is processed (association and map made to agree, names retracted
+        or given then); None: the last movement's map stands.
     placed_by_matching : list of int
         Movements the map left out, placed for this association by matching their detections
         with the final map (:func:`pipeline.association.match.place_left_out`).

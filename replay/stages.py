@@ -237,8 +237,8 @@ class Runner:
         if self.alike is None:
             return
         final = self.alike.final(associating(self.slam))
-        changed = final.retracted or final.named_at_end
-        estimates = estimate_records(self.slam.estimates) if changed else None
+        # the map once the log is processed: its rounds move points even when no name changes
+        estimates = estimate_records(self.slam.estimates)
         record = AssociationRecord(
             self.state.last_timestamp_ns,
             self.state.last_log_time_ns,

@@ -3,7 +3,8 @@
 A map is not trustworthy when its own evidence says so: a class of look-alike landmarks has
 detections that no name explains with the final map (a landmark missing, or a name where rays
 of several landmarks meet), names are doubtful, unconfirmed, weak with the final map, or placed
-only loosely (their 99 % region reaching farther than :data:`LOOSE_M`; flagged one by one), or the
+only loosely (their region reaching farther than :data:`LOOSE_M`, at 99 % for the run's names
+together: :data:`LOOSE_RUN_RISK`; flagged one by one), or the
 bearings of several movements do not fit the map (they were skipped as not fitting it, or the
 map diverged with them), or fewer than half of the movements are in the map, or the map has
 collapsed (landmarks where the robot stood). The verdict is a
@@ -30,10 +31,17 @@ MISFIT_STATUSES = ("does not fit the map", "the map diverged")
 #: The robot's body keeps it several centimetres from any landmark, over 1% of any |L1 L2|
 #: of a few metres.
 COLLAPSE_FL = 0.005
-#: A name of a shared class whose 99 % region (the map's covariance) reaches farther than this
-#: from its point, along its widest axis, is flagged by name: the map cannot tell it within
-#: this distance, and a name that far off is wrong for a user.
+#: A name of a shared class whose region (the map's covariance, at :data:`LOOSE_RUN_RISK` for the
+#: run's names together) reaches farther than this from its point, along its widest axis, is
+#: flagged by name: the map cannot tell it within this distance, and a name that far off is
+#: wrong for a user.
 LOOSE_M = 0.10
+#: The chance, under the map's own covariances, that any name of the run the region test leaves
+#: unflagged is farther than :data:`LOOSE_M` from its point: with n names of shared classes each
+#: region is taken at level 1 - LOOSE_RUN_RISK / n (Bonferroni). A user reads every name of a
+#: run at once: a region at 99 % for each of 16 names leaves a name outside its region in about
+#: one run of seven.
+LOOSE_RUN_RISK = 0.01
 
 
 def trust_reasons(doc: dict[str, Any]) -> list[str]:
@@ -67,24 +75,25 @@ def trust_reasons(doc: dict[str, Any]) -> list[str]:
     loose = _loose(doc)
     if loose:
         reasons.append(
-            f"name(s) {', '.join(loose)} placed only to within {100 * LOOSE_M:.0f} cm or worse"
+            f"name(s) {', '.join(loose)} placed only to within {100 * LOOSE_M:.0f} cm or worse "
+            f"(their regions at {100 * (1 - LOOSE_RUN_RISK):.0f} % for the run's names together)"
         )
     return reasons
 
 
 def _loose(doc: dict[str, Any]) -> list[str]:
-    """Names of shared classes (``label#k``) whose 99 % region reaches farther than
-    :data:`LOOSE_M` from their point (none when the map's unit is unknown)."""
+    """Names of shared classes (``label#k``) whose region, at level 1 - :data:`LOOSE_RUN_RISK`
+    / n for the run's n such names, reaches farther than :data:`LOOSE_M` from their point
+    (none when the map's unit is unknown)."""
     unit_m = doc.get("map_unit_m")
-    if not unit_m:
+    named = {n: e for n, e in doc.get("landmarks", {}).items() if "#" in n}
+    if not unit_m or not named:
         return []
+    scale = math.sqrt(chi2_2dof_quantile(1.0 - LOOSE_RUN_RISK / len(named)))
     out = []
-    for name, est in doc.get("landmarks", {}).items():
+    for name, est in named.items():
         cov = est.get("cov")
-        if "#" not in name or cov is None:
-            continue
-        reach = math.sqrt(chi2_2dof_quantile(0.99)) * widest_std(np.asarray(cov, np.float64))
-        if reach * unit_m > LOOSE_M:
+        if cov is not None and scale * widest_std(np.asarray(cov, np.float64)) * unit_m > LOOSE_M:
             out.append(name)
     return sorted(out, key=lambda n: (n.rpartition("#")[0], int(n.rpartition("#")[2])))
 

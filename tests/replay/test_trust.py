@@ -120,8 +120,9 @@ def test_the_result_line_says_what_the_summary_holds() -> None:
 def test_weak_and_loosely_placed_names_are_flagged_by_name() -> None:
     doc = _doc(["ok"] * 4)
     doc["map_unit_m"] = 0.5  # 1 FL = 50 cm
-    # std 2 cm along the widest axis (0.04 FL): the 99 % region reaches 3.03 * 2 = 6.1 cm
-    # std 4 cm (0.08 FL): 12.1 cm, farther than 10 cm; the unit's own landmark L3 is not named
+    # two names: each region at 99.5 %, sqrt(-2 ln 0.005) = 3.26 std; std 2 cm along the
+    # widest axis (0.04 FL) reaches 6.5 cm; std 4 cm (0.08 FL) 13.0 cm, farther than 10 cm;
+    # the unit's own landmark L3 is not named
     doc["landmarks"] = {
         "L3": {"mean": [0.5, 0.5], "cov": [[0.0064, 0.0], [0.0, 0.0064]]},
         "blue#2": {"mean": [0.2, 0.4], "cov": [[0.0016, 0.0], [0.0, 0.0001]]},
@@ -137,10 +138,27 @@ def test_weak_and_loosely_placed_names_are_flagged_by_name() -> None:
     }
     assert trust_reasons(doc) == [
         "weak name(s) blue#3 (too few detections with the final map)",
-        "name(s) blue#10 placed only to within 10 cm or worse",
+        "name(s) blue#10 placed only to within 10 cm or worse (their regions at 99 % for the "
+        "run's names together)",
     ]
     summary = RunSummary(4, 4, 0, ("L1", "L2"), 3, untrusted=tuple(trust_reasons(doc)))
     assert "NOT trustworthy: weak name(s) blue#3" in result_line(summary)
     # without the map's unit, no distance can be judged
     del doc["map_unit_m"]
     assert trust_reasons(doc) == ["weak name(s) blue#3 (too few detections with the final map)"]
+
+
+def test_loosely_placed_is_judged_for_the_run_s_names_together() -> None:
+    # std 3.2 cm along the widest axis (0.064 FL at 50 cm per FL): alone, the 99 % region
+    # reaches sqrt(-2 ln 0.01) * 3.2 = 3.03 * 3.2 = 9.7 cm, within 10 cm; among 16 names each
+    # region is at 1 - 0.01 / 16, sqrt(-2 ln(0.01 / 16)) = sqrt(14.76) = 3.84 std: 12.3 cm
+    tight = {"mean": [0.3, 0.3], "cov": [[0.000001, 0.0], [0.0, 0.000001]]}  # std 0.05 cm
+    doc = _doc(["ok"] * 4)
+    doc["map_unit_m"] = 0.5
+    doc["landmarks"] = {"blue#1": {"mean": [0.5, 0.5], "cov": [[0.004096, 0.0], [0.0, 0.0001]]}}
+    assert trust_reasons(doc) == []
+    doc["landmarks"] |= {f"blue#{k}": tight for k in range(2, 17)}
+    assert trust_reasons(doc) == [
+        "name(s) blue#1 placed only to within 10 cm or worse (their regions at 99 % for the "
+        "run's names together)"
+    ]
