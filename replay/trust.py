@@ -71,7 +71,10 @@ def trust_reasons(doc: dict[str, Any]) -> list[str]:
             reasons.append(f"{key} name(s) {', '.join(sorted(names))}")
     weak = sorted(n for c in assoc.get("final_map", {}).values() for n in c.get("weak", {}))
     if weak:
-        reasons.append(f"weak name(s) {', '.join(weak)} (too few detections with the final map)")
+        reasons.append(
+            f"weak name(s) {', '.join(weak)} (with the final map, too few detections or "
+            "detections that do not meet at one point)"
+        )
     loose = _loose(doc)
     if loose:
         reasons.append(

@@ -57,6 +57,7 @@ from pipeline.association.predict import (
     predict_ranges,
 )
 from pipeline.association.result import MovementAssociation
+from pipeline.association.support import misfit
 from pipeline.estimate import LandmarkEstimate
 from pipeline.geometry import KeyframePose
 
@@ -345,7 +346,8 @@ def weak_names(
 ) -> dict[str, str]:
     """The ``names`` (in the final map ``mapped``) the final association gives a detection at
     fewer than :data:`WEAK_SHARE` of the keyframes where the map predicts them
-    (:func:`given_share`), with why."""
+    (:func:`given_share`), or whose detections there do not meet at one point
+    (:func:`pipeline.association.support.misfit`, the ``names`` tested together), with why."""
     out = {}
     for name in sorted(names):
         e = mapped.get(name)
@@ -360,7 +362,50 @@ def weak_names(
                 f"predicts it ({100 * given / predicted:.0f} %): it may stand where rays of "
                 "several landmarks meet"
             )
+        elif (why := _misfit(name, e, detections, poses, noise_rad, len(names))) is not None:
+            out[name] = why
     return out
+
+
+def _misfit(
+    name: str,
+    estimate: LandmarkEstimate,
+    detections: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    noise_rad: float,
+    names: int,
+) -> str | None:
+    """:func:`pipeline.association.support.misfit` of the detections given ``name``, each
+    ray's variance the bearing noise's and its keyframe pose's at the map's point."""
+    rays = [
+        (p, d.bearing_rad)
+        for d in detections
+        if d.name == name and d.status == Status.NAMED
+        if (p := poses.get((d.movement, d.end))) is not None
+    ]
+    if not rays:
+        return None
+    var = [
+        float(
+            predict_bearings(
+                p.origin_fl,
+                p.heading_rad,
+                estimate.mean_fl[None, :],
+                np.zeros((1, 2, 2)),
+                bearing_var_rad=noise_rad**2,
+                pose_cov=p.cov,
+            )[1][0]
+        )
+        ** 2
+        for p, _ in rays
+    ]
+    return misfit(
+        np.array([p.origin_fl for p, _ in rays], np.float64).reshape(-1, 2),
+        np.array([p.heading_rad + b for p, b in rays], np.float64),
+        np.array(var, np.float64),
+        estimate.mean_fl,
+        names,
+    )
 
 
 def unexplained_rays(

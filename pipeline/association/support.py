@@ -24,6 +24,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+from numpy.typing import NDArray
+
+from data_schemas.angles import wrap_rad
+from pipeline.association.jcbb import chi2_quantile
+
 #: What became of one prediction at one keyframe: the landmark got a detection ("seen"), none
 #: was in its gate ("missed"), several landmarks or detections were ("contested"), the
 #: prediction was too uncertain to gate anything ("vague"), or a nearer landmark in line with
@@ -55,6 +61,14 @@ DOUBT_SCATTER = 1.7
 #: A name not doubtful is confirmed once seen at this many keyframes since it was named (two
 #: movements' worth, beyond the lines of sight or the keyframes that named it).
 CONFIRM_MIN_SEEN = 4
+#: With the final map, a name whose detections do not meet at one point is flagged
+#: (:func:`misfit`): their squared residuals about the point that fits them best, each in units
+#: of its prediction's variance, beyond the chi-square quantile (n - 2 dof) at level
+#: 1 - MISFIT_RUN_RISK / k for the run's k names (Bonferroni: the chance that any name of a run
+#: whose detections are all its own landmark's is flagged is at most this).
+MISFIT_RUN_RISK = 0.01
+#: ... tested from this many detections (two fix the point).
+MISFIT_MIN_RAYS = 4
 
 
 @dataclass
@@ -137,3 +151,63 @@ class Support:
             f"seen at {self.seen} keyframe(s) since it was named (movement {self.named_at}); "
             f"{CONFIRM_MIN_SEEN} confirm a name"
         )
+
+
+def misfit(
+    origins_fl: NDArray[np.float64],
+    directions_rad: NDArray[np.float64],
+    var_rad2: NDArray[np.float64],
+    point_fl: NDArray[np.float64],
+    names: int,
+) -> str | None:
+    """Why a name's detections do not meet at one point (None: they do, or are too few).
+
+    Rays of two landmarks a few degrees apart, or of a landmark and a keyframe placed wrong,
+    each fit a point well enough to be gated, yet together they leave residuals the map's
+    noise does not explain. The test: the point that minimises the squared bearing residuals
+    (Gauss-Newton from ``point_fl``, each ray weighted by its variance) and the sum of those
+    squared residuals against the chi-square quantile with n - 2 degrees of freedom at level
+    1 - :data:`MISFIT_RUN_RISK` / ``names``.
+
+    Parameters
+    ----------
+    origins_fl : (n, 2) float
+        Where each detection was made (its keyframe), FL.
+    directions_rad : (n,) float
+        Each detection's direction, FL (keyframe heading plus bearing), rad.
+    var_rad2 : (n,) float
+        Each detection's variance about the true bearing (bearing noise and the keyframe
+        pose's), rad^2.
+    point_fl : (2,) float
+        Where the map holds the name, FL: the fit starts there.
+    names : int
+        Names of the run tested together (k of the Bonferroni level).
+    """
+    n = len(directions_rad)
+    if n < MISFIT_MIN_RAYS:
+        return None
+    w = 1.0 / np.asarray(var_rad2, np.float64)
+    p = np.asarray(point_fl, np.float64).copy()
+    for _ in range(10):
+        d = p - origins_fl
+        r2 = np.maximum((d**2).sum(axis=1), 1e-12)
+        jac = np.column_stack((-d[:, 1], d[:, 0])) / r2[:, None]  # d bearing / d point
+        res = wrap_rad(directions_rad - np.arctan2(d[:, 1], d[:, 0]))
+        lhs = jac.T @ (w[:, None] * jac)
+        if abs(float(np.linalg.det(lhs))) < 1e-18:
+            break
+        step = np.linalg.solve(lhs, jac.T @ (w * res))
+        p = p + step
+        if float(step @ step) < 1e-16:
+            break
+    d = p - origins_fl
+    stat = float(np.sum(w * wrap_rad(directions_rad - np.arctan2(d[:, 1], d[:, 0])) ** 2))
+    level = 1.0 - MISFIT_RUN_RISK / max(names, 1)
+    bound = chi2_quantile(n - 2, level)
+    if stat <= bound:
+        return None
+    return (
+        f"its {n} detections with the final map do not meet at one point: their squared "
+        f"residuals sum to {stat:.0f} noise variances, beyond the {bound:.0f} of one "
+        f"landmark's ({n - 2} dof, {100 * level:.2f} %): they may come from several landmarks"
+    )

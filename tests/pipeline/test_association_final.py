@@ -479,9 +479,11 @@ def test_a_name_given_few_of_its_predicted_detections_is_weak() -> None:
     # gate (2 eps = 6 degrees), so not counted
     poses[8, 0] = KeyframePose(np.zeros(2), 0.0, np.diag([1e-6, 1e-6, (10 * DEG) ** 2]))
 
-    def given(n: int) -> list[FinalDetection]:
+    def given(n: int) -> list[FinalDetection]:  # bearings that meet at e's point
         return [
-            FinalDetection(k, 0, "blue", 0.0, "blue#1" if k < n else None, Status.NAMED)
+            FinalDetection(
+                k, 0, "blue", math.atan2(-0.1 * k, 1.0), "blue#1" if k < n else None, Status.NAMED
+            )
             for k in range(9)
         ]
 

@@ -137,7 +137,8 @@ def test_weak_and_loosely_placed_names_are_flagged_by_name() -> None:
         },
     }
     assert trust_reasons(doc) == [
-        "weak name(s) blue#3 (too few detections with the final map)",
+        "weak name(s) blue#3 (with the final map, too few detections or detections that do "
+        "not meet at one point)",
         "name(s) blue#10 placed only to within 10 cm or worse (their regions at 99 % for the "
         "run's names together)",
     ]
@@ -145,7 +146,10 @@ def test_weak_and_loosely_placed_names_are_flagged_by_name() -> None:
     assert "NOT trustworthy: weak name(s) blue#3" in result_line(summary)
     # without the map's unit, no distance can be judged
     del doc["map_unit_m"]
-    assert trust_reasons(doc) == ["weak name(s) blue#3 (too few detections with the final map)"]
+    assert trust_reasons(doc) == [
+        "weak name(s) blue#3 (with the final map, too few detections or detections that do "
+        "not meet at one point)"
+    ]
 
 
 def test_loosely_placed_is_judged_for_the_run_s_names_together() -> None:
