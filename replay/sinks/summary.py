@@ -25,8 +25,9 @@ detections associated again with the final map once the log is processed (``name
 map leaves several of its detections unexplained, every name of the class given or not,
 ``retracted``: names taken back then and given to the landmark those detections point at,
 ``named_at_end``: free names given then to landmarks unexplained detections point at; the
-map after either is the document's ``landmarks``; and ``weak``: names the final association
-gives a detection at too few of the keyframes where the final map predicts them, name -> why),
+map once the log is processed is the document's ``landmarks``; and ``weak``: names the final
+association gives a detection at too few of the keyframes where the final map predicts them,
+or whose detections there do not meet at one point, name -> why),
 ``placed_by_matching`` (movements the map left out, placed for that association by matching
 their detections with the final map) and, for simulated logs, ``matched_truth`` (each
 ``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
