@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from alike_scenarios import alike_arena, alike_scenario
+from alike_scenarios import alike_arena
 from alike_scoring import score_log
 
 from replay.experiments.run import simulate
@@ -59,3 +59,16 @@ def test_every_name_more_than_10_cm_off_is_flagged_by_name(
     assert all(name in line for name in off)
     if off:
         assert not trust["trustworthy"] and "NOT trustworthy" in line
+
+
+@pytest.mark.slow  # one simulated 30-movement run, about 10 s
+def test_a_clean_map_s_right_names_are_not_flagged(tmp_path: Path) -> None:
+    # 12 identical landmarks, unwrapped camera, seed 12: every name within 10 cm of its
+    # landmark (measured against the truth); the tests of a name's detections and of its
+    # region, taken for the run's 12 names together, flag none of them
+    log = tmp_path / "run.mcap"
+    simulate(alike_arena(12, "unwrapped", (4.0, 3.0), seed=12), log, seed=12)
+    s = score_log(log)
+    assert len(s.errors_m) == 12 and max(s.errors_m.values()) <= 0.10
+    assert s.summary["trust"] == {"trustworthy": True}
+    assert "NOT trustworthy" not in result_line(s.result)
