@@ -5,12 +5,15 @@ names are not flagged."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 from alike_scenarios import alike_arena
 from alike_scoring import score_log
+from click.testing import CliRunner
 
+from replay.cli import cli
 from replay.experiments.run import simulate
 from replay.process import result_line
 
@@ -72,3 +75,17 @@ def test_a_clean_map_s_right_names_are_not_flagged(tmp_path: Path) -> None:
     assert len(s.errors_m) == 12 and max(s.errors_m.values()) <= 0.10
     assert s.summary["trust"] == {"trustworthy": True}
     assert "NOT trustworthy" not in result_line(s.result)
+
+
+@pytest.mark.slow  # one simulated 30-movement run, about 15 s
+def test_an_untrustworthy_map_is_a_result_bslam_process_exits_0(tmp_path: Path) -> None:
+    # 12 identical landmarks, omni camera, seed 9: blue#12 ends 11.4 cm off (truth measured)
+    log, summary = tmp_path / "run.mcap", tmp_path / "run.summary.json"
+    simulate(alike_arena(12, "omni", (4.0, 3.0), seed=9), log, seed=9)
+    result = CliRunner().invoke(cli, ["process", str(log), "--summary", str(summary)])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(summary.read_text())
+    assert doc["error_m"]["blue#12"] > 0.10
+    assert doc["trust"]["trustworthy"] is False
+    assert "blue#12" in _flagged(doc["trust"]["reasons"])
+    assert "the map is NOT trustworthy" in result.output and "blue#12" in result.output
