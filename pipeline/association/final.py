@@ -17,9 +17,9 @@ where named landmarks line up (none clearly in front) is said to be theirs ("in 
 :func:`missing_reports` says when a class still has detections no name explains (every name
 of it given or not), and where their rays meet (:func:`meeting_point`).
 
-:func:`repair_final` then gives a free name, or a doubtful one, to the point where those
-detections meet as the search names a landmark, or gives names under suspicion anew where
-their detections and the unexplained ones meet (:func:`_rebuild`).
+:func:`repair_final` then gives a free name, or the one the final map supports least, to the
+point where those detections meet as the search names a landmark, or gives names under
+suspicion anew where their detections and the unexplained ones meet (:func:`_rebuild`).
 """
 
 from __future__ import annotations
@@ -495,11 +495,12 @@ def repair_final(
     """Once the log is processed, per class, where the detections the final map leaves
     unexplained meet at one point as a search names a landmark (:func:`_final_point`): with
     names of the class still free, the point gets the next one (and the rest of the rays are
-    searched again while names are free: ``named_at_end``); with every name given and one
-    doubtful, a doubtful name is retracted and given to the point (as a full catalog does
-    during the run): the one the final association gave a detection at the smallest share of
-    the keyframes where the final map predicts it (:func:`_final_share`). When neither gives a
-    name, names under suspicion may be given anew (:func:`_rebuild`).
+    searched again while names are free: ``named_at_end``); with every name given, the name
+    the final association gave a detection at the smallest share of the keyframes where the
+    final map predicts it (:func:`_final_share`; doubtful or not) is retracted and given to
+    the point, when the point explains more detections than the name does (the likelier of
+    the two). When neither gives a name, names under suspicion may be given anew
+    (:func:`_rebuild`).
 
     ``names`` holds the names given and gives the new ones, ``final`` is
     :func:`associate_final`'s association, ``poses`` and ``mapped`` the final map, ``index``
@@ -512,19 +513,27 @@ def repair_final(
         full = len(names.named[label]) >= count
         given = len(out.confirmed)
         rays = unexplained_rays(final, label, poses)
-        while (not full or names.most_doubtful(label) is not None) and (
-            found := _final_point(names, label, rays, mapped)
-        ) is not None:
+        while (found := _final_point(names, label, rays, mapped)) is not None:
             h, lines = found
             out.names.setdefault(label, ([], []))
             if full:
-                weakest = min(
-                    (n for n in names.named[label] if names.support[n].doubt() is not None),
-                    key=lambda n: _final_share(n, final, poses, mapped, names.model),
-                )
+                share = {
+                    n: _final_share(n, final, poses, mapped, names.model)
+                    for n in names.named[label]
+                }
+                weakest = min(share, key=lambda n: share[n])
                 # the name moves only to a point that explains more detections than it does
-                if len(h.rays) > sum(d.name == weakest for d in final):
-                    names.give_name(label, h, lines, out, searched=True, retract=weakest)
+                given_to = sum(d.name == weakest for d in final)
+                if len(h.rays) > given_to:
+                    x, y = h.point_fl
+                    why = (
+                        f"given a detection at {100 * share[weakest]:.0f} % of the keyframes "
+                        f"where the final map predicts it, the smallest share of {label}; "
+                        f"retracted once the log was processed: the name goes to "
+                        f"({x:.2f}, {y:.2f}) FL, where {len(h.rays)} detections the final map "
+                        f"left unexplained meet (it was given {given_to})"
+                    )
+                    names.give_name(label, h, lines, out, searched=True, retract=weakest, why=why)
                 break
             names.give_name(label, h, lines, out, searched=True)
             x, y = h.point_fl

@@ -482,3 +482,27 @@ def test_a_map_broken_by_names_of_mixed_rays_is_mended_once_the_log_is_processed
     assert max(s.errors_m.values()) <= 0.10, s.errors_m
     right, detections = s.n_final_correct, s.n_final_detections
     assert right >= 0.9 * detections, (right, detections)
+
+
+@pytest.mark.slow  # one simulated 30-movement run of 16 landmarks, 10-20 s
+def test_the_name_the_final_map_supports_least_goes_to_the_landmark_it_kept_out(
+    tmp_path: Path,
+) -> None:
+    # 16 identical landmarks in 5 x 4 m, omni, seed 4: with every name given, the unexplained
+    # detections meet at a landmark no name holds. A name in open space (given a detection at
+    # a few % of its predictions with the final map) is not doubtful by its support during the
+    # run, so a rule that retracts only doubtful names retracted a right one instead (main
+    # before: blue#13, 3 cm off) and the ghost stayed 2.2 m off; 78 % of the detections right.
+    # Retracting the name the final map supports least, when the point explains more
+    # detections than it, puts that name on the landmark (the truth measured directly)
+    log = tmp_path / "run.mcap"
+    simulate(alike_arena(16, "omni", (5.0, 4.0), seed=4), log, seed=4)
+    s = score_log(log)
+    retracted = _retracted_at_end(s)
+    assert len(retracted) == 1, retracted
+    ((name, why),) = retracted.items()
+    assert "the smallest share of blue" in why
+    assert name not in _doubtful_last(s)  # the old rule could not choose it
+    assert s.errors_m[name] <= 0.10, s.errors_m
+    right, detections = s.n_final_correct, s.n_final_detections
+    assert right >= 0.85 * detections, (right, detections)
