@@ -495,12 +495,12 @@ def repair_final(
     """Once the log is processed, per class, where the detections the final map leaves
     unexplained meet at one point as a search names a landmark (:func:`_final_point`): with
     names of the class still free, the point gets the next one (and the rest of the rays are
-    searched again while names are free: ``named_at_end``); with every name given, the name
-    the final association gave a detection at the smallest share of the keyframes where the
-    final map predicts it (:func:`_final_share`; doubtful or not) is retracted and given to
-    the point, when the point explains more detections than the name does (the likelier of
-    the two). When neither gives a name, names under suspicion may be given anew
-    (:func:`_rebuild`).
+    searched again while names are free: ``named_at_end``); with every name given, the name the
+    final map supports least (:func:`_least_supported`: one it does not hold, else the one the
+    final association gave a detection at the smallest share of the keyframes where the final
+    map predicts it; doubtful or not) is retracted and given to the point, when the point
+    explains more detections than the name does (the likelier of the two). When neither gives a
+    name, names under suspicion may be given anew (:func:`_rebuild`).
 
     ``names`` holds the names given and gives the new ones, ``final`` is
     :func:`associate_final`'s association, ``poses`` and ``mapped`` the final map, ``index``
@@ -517,18 +517,14 @@ def repair_final(
             h, lines = found
             out.names.setdefault(label, ([], []))
             if full:
-                share = {
-                    n: _final_share(n, final, poses, mapped, names.model)
-                    for n in names.named[label]
-                }
-                weakest = min(share, key=lambda n: share[n])
+                share, ranked = _least_supported(names, label, final, poses, mapped)
+                weakest = ranked[0]
                 # the name moves only to a point that explains more detections than it does
                 given_to = sum(d.name == weakest for d in final)
                 if len(h.rays) > given_to:
                     x, y = h.point_fl
                     why = (
-                        f"given a detection at {100 * share[weakest]:.0f} % of the keyframes "
-                        f"where the final map predicts it, the smallest share of {label}; "
+                        f"{_support_text(weakest, share, mapped)}, the least of {label}; "
                         f"retracted once the log was processed: the name goes to "
                         f"({x:.2f}, {y:.2f}) FL, where {len(h.rays)} detections the final map "
                         f"left unexplained meet (it was given {given_to})"
@@ -565,8 +561,7 @@ def _rebuild(
     than the names do; each point gets the name nearest to it, unless within
     :data:`FINAL_APART_CHI2` of it already."""
     support = names.support
-    share = {n: _final_share(n, final, poses, mapped, names.model) for n in names.named[label]}
-    weakest = sorted(share, key=lambda n: (n in mapped, share[n]))  # unmapped: none given
+    share, weakest = _least_supported(names, label, final, poses, mapped)
     doubtful = [n for n in names.named[label] if support[n].doubt() is not None]
     suspects = [doubtful] if doubtful else []
     suspects += [weakest[:k] for k in range(1, REBUILD_SUSPECTS + 1)]
@@ -599,19 +594,36 @@ def _rebuild(
     for k, n in given.items():
         h, lines = found[k]
         x, y = h.point_fl
-        seen = (
-            f"given a detection at {100 * share[n]:.0f} % of the keyframes where predicted"
-            if n in mapped
-            else "not in the final map (its bearings never met at one point)"
-        )
+        seen = support[n].doubt() or _support_text(n, share, mapped)
         why = (
-            f"{support[n].doubt() or seen}; given anew once the log was processed: "
+            f"{seen}; given anew once the log was processed: "
             f"with the detections the final map left unexplained, those of "
             f"{', '.join(suspected)} meet at {len(found)} point(s), which explain "
             f"{explained} detections against {before}; this one "
             f"at ({x:.2f}, {y:.2f}) FL along {lines} lines of sight"
         )
         names.give_name(label, h, lines, out, searched=True, retract=n, why=why)
+
+
+def _least_supported(
+    names: Lifecycle,
+    label: str,
+    final: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    mapped: Mapping[str, LandmarkEstimate],
+) -> tuple[dict[str, float], list[str]]:
+    """Each name of ``label`` with its share of predictions the final association gave a
+    detection (:func:`_final_share`), and the names from the least supported: those the final
+    map does not hold first (it gives them nothing), then by share."""
+    share = {n: _final_share(n, final, poses, mapped, names.model) for n in names.named[label]}
+    return share, sorted(share, key=lambda n: (n in mapped, share[n]))
+
+
+def _support_text(name: str, share: Mapping[str, float], mapped: Collection[str]) -> str:
+    """What the final map gives ``name``, in words."""
+    if name not in mapped:
+        return "not in the final map (its bearings never met at one point)"
+    return f"given a detection at {100 * share[name]:.0f} % of the keyframes where predicted"
 
 
 def _final_point(

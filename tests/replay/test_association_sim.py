@@ -501,7 +501,7 @@ def test_the_name_the_final_map_supports_least_goes_to_the_landmark_it_kept_out(
     retracted = _retracted_at_end(s)
     assert len(retracted) == 1, retracted
     ((name, why),) = retracted.items()
-    assert "the smallest share of blue" in why
+    assert "the least of blue" in why
     assert name not in _doubtful_last(s)  # the old rule could not choose it
     assert s.errors_m[name] <= 0.10, s.errors_m
     right, detections = s.n_final_correct, s.n_final_detections
