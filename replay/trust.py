@@ -21,6 +21,7 @@ import numpy as np
 
 from pipeline.estimate import chi2_2dof_quantile
 from pipeline.geometry import widest_std
+from pipeline.joint.robustness import REJECT_EPS
 
 #: This many movements skipped because their bearings did not fit the map make it doubtful.
 MISFIT_MOVEMENTS = 2
@@ -42,6 +43,12 @@ LOOSE_M = 0.10
 #: run at once: a region at 99 % for each of 16 names leaves a name outside its region in about
 #: one run of seven.
 LOOSE_RUN_RISK = 0.01
+#: A landmark with at least this many recorded bearings (``residuals_deg`` of the movements),
+#: more than half of them beyond :data:`~pipeline.joint.robustness.REJECT_EPS` eps of the map,
+#: is flagged by name. The bearing error is bounded by eps, so such a residual is a wrong
+#: detection or a wrong map; where the map holds a landmark right, its wrong detections are the
+#: exception (docs/RESULTS.md, "Trust verdict on the arena families").
+UNFIT_MIN_BEARINGS = 6
 
 
 def trust_reasons(doc: dict[str, Any]) -> list[str]:
@@ -75,6 +82,21 @@ def trust_reasons(doc: dict[str, Any]) -> list[str]:
             f"weak name(s) {', '.join(weak)} (with the final map, too few detections or "
             "detections that do not meet at one point)"
         )
+    unfit = _unfit(doc)
+    ref = {doc.get("frame", {}).get(k) for k in ("origin", "x_axis")}
+    for name, far, n in unfit:
+        if name in ref:
+            reasons.append(
+                f"{far} of {n} bearings of the reference landmark {name} lie more than "
+                f"{REJECT_EPS:g} eps from the map: the map's frame rests on it"
+            )
+    others = [f"{name} ({far} of {n})" for name, far, n in unfit if name not in ref]
+    if others:
+        reasons.append(
+            f"landmark(s) {', '.join(others)} whose bearings mostly lie more than "
+            f"{REJECT_EPS:g} eps from the map (it stands elsewhere, or its detections are "
+            "another's)"
+        )
     loose = _loose(doc)
     if loose:
         reasons.append(
@@ -99,6 +121,29 @@ def _loose(doc: dict[str, Any]) -> list[str]:
         if cov is not None and scale * widest_std(np.asarray(cov, np.float64)) * unit_m > LOOSE_M:
             out.append(name)
     return sorted(out, key=lambda n: (n.rpartition("#")[0], int(n.rpartition("#")[2])))
+
+
+def _unfit(doc: dict[str, Any]) -> list[tuple[str, int, int]]:
+    """Landmarks with at least :data:`UNFIT_MIN_BEARINGS` recorded bearings, more than half of
+    them beyond :data:`~pipeline.joint.robustness.REJECT_EPS` eps of the map: (name, how many
+    beyond, how many), in the order first recorded (none when eps is unknown)."""
+    eps_deg = (doc.get("method") or {}).get("vision_error_deg")
+    if not eps_deg:
+        return []
+    bound = REJECT_EPS * float(eps_deg)
+    far: dict[str, int] = {}
+    seen: dict[str, int] = {}
+    for m in doc.get("movements", []):
+        for name, ends in (m.get("residuals_deg") or {}).items():
+            for r in ends:
+                if r is not None:
+                    seen[name] = seen.get(name, 0) + 1
+                    far[name] = far.get(name, 0) + (abs(r) > bound)
+    return [
+        (name, far[name], n)
+        for name, n in seen.items()
+        if n >= UNFIT_MIN_BEARINGS and 2 * far[name] > n
+    ]
 
 
 def _collapsed(doc: dict[str, Any]) -> list[str]:

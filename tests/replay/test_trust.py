@@ -166,3 +166,42 @@ def test_loosely_placed_is_judged_for_the_run_s_names_together() -> None:
         "name(s) blue#1 placed only to within 10 cm or worse (their regions at 99 % for the "
         "run's names together)"
     ]
+
+
+def _residual_doc(residuals: dict[str, list[list[float | None]]]) -> dict[str, Any]:
+    """A map of 8 movements whose named landmarks have these residuals (deg) at O1, O2 of
+    movement k, eps 3 deg (so the rejection bound is 6 deg)."""
+    doc = _doc(["ok"] * 8)
+    doc["method"] = {"vision_error_deg": 3.0}
+    for k, m in enumerate(doc["movements"]):
+        m["residuals_deg"] = {n: r[k] for n, r in residuals.items() if k < len(r)}
+    return doc
+
+
+def test_a_landmark_whose_bearings_mostly_miss_the_map_is_named() -> None:
+    good = [[0.5, -0.4]] * 8
+    # L4: 4 of its 8 bearings beyond 6 deg: half, not most (a landmark with wrong detections)
+    half = [[7.0, 0.2], [-9.0, 0.1], [6.5, -0.3], [-6.1, 0.0]]
+    assert trust_reasons(_residual_doc({"L1": good, "L3": good, "L4": half})) == []
+    # L4: 6 of 9 beyond (a residual of exactly 6 deg is within the bound; None: not seen)
+    most = [[7.0, 6.0], [-9.0, 0.1], [6.5, -12.0], [-6.1, 5.9], [None, 30.0]]
+    assert trust_reasons(_residual_doc({"L1": good, "L4": most})) == [
+        "landmark(s) L4 (6 of 9) whose bearings mostly lie more than 2 eps from the map (it "
+        "stands elsewhere, or its detections are another's)"
+    ]
+    # all 4 of L5's bearings far, but too few to judge
+    few = [[20.0, 20.0], [20.0, 20.0]]
+    assert trust_reasons(_residual_doc({"L1": good, "L5": few})) == []
+
+
+def test_a_reference_landmark_whose_bearings_miss_the_map_puts_the_frame_in_doubt() -> None:
+    far = [[-15.5, 0.3], [-17.4, -8.9], [-11.9, -8.2], [-8.4, 1.0]]
+    reasons = trust_reasons(_residual_doc({"L2": far, "L3": [[0.1, 0.2]] * 8}))
+    assert reasons == [
+        "6 of 8 bearings of the reference landmark L2 lie more than 2 eps from the map: the "
+        "map's frame rests on it"
+    ]
+    # without the vision error bound nothing is judged
+    doc = _residual_doc({"L2": far})
+    del doc["method"]
+    assert trust_reasons(doc) == []
