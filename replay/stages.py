@@ -237,6 +237,12 @@ class Runner:
         if self.alike is None:
             return
         final = self.alike.final(associating(self.slam))
+        mapped = self.alike.landmarks(self.session.landmark_names())
+        rebuilt = self.alike.rebuilt(
+            final, lambda: associating(estimator_for(self.method, self.session, mapped))
+        )
+        if rebuilt is not None:  # the map built again from the first movement explains more
+            self.alike, self.slam, final = rebuilt
         # the map once the log is processed: its rounds move points even when no name changes
         estimates = estimate_records(self.slam.estimates)
         record = AssociationRecord(

@@ -13,8 +13,9 @@ turn with solving the map again, until the two agree.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+import copy
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 
 from data_schemas.session import Session, shared_classes
 from pipeline.association.final import FinalDetection, Status, weak_names
@@ -39,6 +40,13 @@ RESOLVE_ROUNDS = 6
 #: A name is given its final association's detections only when they are at least this many
 #: (fewer may not place it; it keeps the bearings it was named and associated with).
 RESOLVE_MIN_BEARINGS = 8
+#: Once the final rounds end, a map that leaves more than this share of the shared classes'
+#: detections at the keyframes it holds unnamed is built a
+#: second time from the first movement with the final association's names
+#: (:meth:`AlikeLandmarks.second_pass`), again from each map so built that explains more, at
+#: most this many times.
+SECOND_PASS_UNNAMED = 0.05
+SECOND_PASSES = 3
 
 
 class AlikeLandmarks:
@@ -60,6 +68,8 @@ class AlikeLandmarks:
         self.keyframe_unique: dict[tuple[int, int], dict[str, float]] = {}
         #: the bearings the estimator was given of each name: (movement, end, bearing_rad)
         self.given: dict[str, set[tuple[int, int, float]]] = {}
+        #: each observed movement's commanded turn (rad) and driven distance (m), by index
+        self.motion: dict[int, tuple[float | None, float | None]] = {}
 
     def landmarks(self, catalog: Sequence[str]) -> list[str]:
         """What the estimator maps: catalog landmarks of their own class, then ``red#k`` names."""
@@ -93,6 +103,7 @@ class AlikeLandmarks:
         for end, per_class in enumerate(blobs):
             self.keyframe_blobs[index, end] = per_class
             self.keyframe_unique[index, end] = unique[end]
+        self.motion[index] = (turn_rad, distance_m)
         assoc = self.associator.associate(
             index, (unique[0], unique[1]), (blobs[0], blobs[1]), estimator.estimates
         )
@@ -194,6 +205,72 @@ class AlikeLandmarks:
         )
         return FinalAssociation(detections, reports, retracted, placed, named_at_end, weak)
 
+    def rebuilt(
+        self,
+        first: FinalAssociation,
+        fresh: Callable[[], AssociatingEstimator],
+    ) -> tuple[AlikeLandmarks, AssociatingEstimator, FinalAssociation] | None:
+        """The map built again from the first movement (:meth:`second_pass`) while it stays
+        broken and each pass explains more detections, at most :data:`SECOND_PASSES` times:
+        the last association, estimator and final association, or None when no pass
+        explained more than ``first``."""
+        best = None
+        alike, final = self, first
+        for _ in range(SECOND_PASSES):
+            again = alike.second_pass(final, fresh)
+            if again is None:
+                break
+            best = again
+            alike, _, final = again
+        return best
+
+    def second_pass(
+        self,
+        first: FinalAssociation,
+        fresh: Callable[[], AssociatingEstimator],
+    ) -> tuple[AlikeLandmarks, AssociatingEstimator, FinalAssociation] | None:
+        """The map built a second time when ``first`` (:meth:`final`'s result) leaves it
+        broken by its own evidence (:meth:`FinalAssociation.broken`): a ``fresh`` estimator
+        takes every movement again from the first, each keyframe's detections under the names
+        ``first`` gave them (no name made of mixed rays enters early to misplace the
+        keyframes), then :meth:`final` on a copy of this association. Returns the copy, the new
+        estimator and its final association when that explains more detections than ``first``
+        (:meth:`FinalAssociation.explained`), else None (keep the first map)."""
+        if not first.broken():
+            return None
+        named: dict[tuple[int, int], dict[str, float]] = {}
+        for d in first.detections:
+            if d.name is not None and d.status == Status.NAMED:
+                named.setdefault((d.movement, d.end), {})[d.name] = d.bearing_rad
+        again = copy.deepcopy(self)
+        again.given = {}
+        estimator = fresh()
+        for index in sorted(self.motion):
+            ends = tuple(
+                {**self.keyframe_unique.get((index, end), {}), **named.get((index, end), {})}
+                for end in (0, 1)
+            )
+            for end, bearings in enumerate(ends):
+                for name, b in bearings.items():
+                    if name in self.alike:
+                        again.given.setdefault(name, set()).add((index, end, b))
+            estimator.process_movement(
+                MovementObservation(index, ends[0], ends[1], *self.motion[index])
+            )
+        second = again.final(estimator)
+        if second.explained() <= first.explained():
+            return None
+        # the names moved from where the run left them in either pass
+        return (
+            again,
+            estimator,
+            replace(
+                second,
+                retracted={**first.retracted, **second.retracted},
+                named_at_end={**first.named_at_end, **second.named_at_end},
+            ),
+        )
+
     def _reassigned(
         self, detections: Sequence[FinalDetection], left_out: set[int]
     ) -> dict[str, list[tuple[int, int, float]]]:
@@ -227,3 +304,15 @@ class FinalAssociation:
     placed_by_matching: list[int] = field(default_factory=list)
     named_at_end: dict[str, str] = field(default_factory=dict)
     weak: dict[str, str] = field(default_factory=dict)
+
+    def explained(self) -> int:
+        """How many detections the final map gives a name."""
+        return sum(1 for d in self.detections if d.status == Status.NAMED)
+
+    def broken(self) -> bool:
+        """Whether the map is broken by its own evidence: more than
+        :data:`SECOND_PASS_UNNAMED` of the detections at the keyframes it holds left without a
+        name."""
+        held = [d for d in self.detections if d.status != Status.NOT_PLACED]
+        unnamed = sum(1 for d in held if d.status != Status.NAMED)
+        return unnamed > SECOND_PASS_UNNAMED * len(held)
