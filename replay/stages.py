@@ -242,6 +242,14 @@ class Runner:
             final, lambda: associating(estimator_for(self.method, self.session, mapped))
         )
         if rebuilt is not None:  # the map built again from the first movement explains more
+            logger.info(
+                "%s: the map built again from the first movement with the final association's "
+                "names: %d of %d detections named (before: %d)",
+                self.log.name,
+                rebuilt[2].explained(),
+                len(final.detections),
+                final.explained(),
+            )
             self.alike, self.slam, final = rebuilt
         # the map once the log is processed: its rounds move points even when no name changes
         estimates = estimate_records(self.slam.estimates)

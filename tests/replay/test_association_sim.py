@@ -506,3 +506,22 @@ def test_the_name_the_final_map_supports_least_goes_to_the_landmark_it_kept_out(
     assert s.errors_m[name] <= 0.10, s.errors_m
     right, detections = s.n_final_correct, s.n_final_detections
     assert right >= 0.85 * detections, (right, detections)
+
+
+@pytest.mark.slow
+def test_a_map_broken_during_the_run_is_built_again_from_the_first_movement(
+    tmp_path: Path,
+) -> None:
+    # 16 identical landmarks in 5 x 4 m, omni, seed 6: names made of rays of several landmarks
+    # entered the young map and misplaced its keyframes; the last movement's map holds a name
+    # metres off, and the final rounds (which start from those keyframes) left one 4 m off and
+    # 82 % of the detections right (main before). Built again from the first movement with the
+    # final association's names, no mixed name enters early: every name the map holds is
+    # within 20 cm of its landmark (the truth measured directly), at least 85 % right
+    log = tmp_path / "run.mcap"
+    simulate(alike_arena(16, "omni", (5.0, 4.0), seed=6), log, seed=6)
+    s = score_log(log)
+    assert max(s.errors_last_m.values()) > 1.0, s.errors_last_m  # broken during the run
+    assert max(s.errors_m.values()) <= 0.20, s.errors_m
+    right, detections = s.n_final_correct, s.n_final_detections
+    assert right >= 0.85 * detections, (right, detections)
