@@ -45,7 +45,7 @@ RESOLVE_MIN_BEARINGS = 8
 #: second time from the first movement with the final association's names
 #: (:meth:`AlikeLandmarks.second_pass`), again from each map so built that explains more, at
 #: most this many times.
-SECOND_PASS_UNNAMED = 0.05
+SECOND_PASS_UNNAMED = 0.10
 SECOND_PASSES = 3
 
 
