@@ -32,14 +32,14 @@ def _flagged(reasons: list[str]) -> set[str]:
         # blue#12 11.4 cm off, its 99 % region reaching 9.98 cm: within 10 cm for one name,
         # not for the run's 12 names together
         (12, (4.0, 3.0), "omni", 9, True),
-        # blue#15 18.5 cm off, named once the log was processed from rays of two landmarks
-        # (one early in the run, another later) that do not meet at one point
-        (16, (5.0, 4.0), "unwrapped", 19, True),
+        # blue#12 and blue#15 17-20 cm off, weak with the final map (16 unwrapped seed 19, its
+        # name 18.5 cm off, is mended by the map built again from the first movement)
+        (16, (5.0, 4.0), "unwrapped", 7, True),
         # the summary held the last movement's map, blue#10 16.5 cm off; the final map (after
         # association and map were made to agree) has it 1.7 cm off
         (12, (4.0, 3.0), "unwrapped", 20, False),
     ],
-    ids=["12-omni-1", "16-unwrapped-1", "12-omni-9", "16-unwrapped-19", "12-unwrapped-20"],
+    ids=["12-omni-1", "16-unwrapped-1", "12-omni-9", "16-unwrapped-7", "12-unwrapped-20"],
 )
 def test_every_name_more_than_10_cm_off_is_flagged_by_name(
     n: int,
