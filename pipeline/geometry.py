@@ -90,6 +90,56 @@ def predicted_bearings(
     return wrap_rad(np.arctan2(dy, dx) - headings_rad)
 
 
+def bearing_point(
+    origins: NDArray[np.float64],
+    directions_rad: NDArray[np.float64],
+    start: NDArray[np.float64],
+    weights: NDArray[np.float64] | None = None,
+    *,
+    steps: int = 5,
+    tol: float = 1e-12,
+    min_det: float = 0.0,
+) -> NDArray[np.float64]:
+    """The point (2,) that minimises the (weighted) squared bearing errors of rays, by
+    Gauss-Newton from ``start`` (the point so far is kept when a step cannot be taken).
+
+    Parameters
+    ----------
+    origins : (n, 2) float
+        Where each ray starts (any frame; the point comes out in it).
+    directions_rad : (n,) float
+        Each ray's direction in that frame, rad.
+    start : (2,) float
+        The first point.
+    weights : (n,) float, optional
+        Each ray's weight (inverse variance); equal when None.
+    steps, tol : int, float
+        At most ``steps`` steps, stopping once a step's squared length is below ``tol``.
+    min_det : float
+        The normal matrix must have a determinant above this for a step.
+    """
+    w = np.ones(len(directions_rad)) if weights is None else np.asarray(weights, np.float64)
+    p = np.asarray(start, np.float64).copy()
+    for _ in range(steps):
+        d = p - origins
+        r2 = np.maximum((d**2).sum(axis=1), 1e-12)
+        jac = np.column_stack((-d[:, 1], d[:, 0])) / r2[:, None]  # d bearing / d point
+        res = wrap_rad(directions_rad - np.arctan2(d[:, 1], d[:, 0]))
+        lhs = jac.T @ (w[:, None] * jac)
+        if min_det > 0.0 and abs(float(np.linalg.det(lhs))) < min_det:
+            return p
+        try:
+            step = np.linalg.solve(lhs, jac.T @ (w * res))
+        except np.linalg.LinAlgError:
+            return p
+        if not np.all(np.isfinite(step)):
+            return p
+        p = p + step
+        if float(step @ step) < tol:
+            break
+    return p
+
+
 #: Minimal parallax (rad) for a two-view triangulation (:func:`triangulate_fr`) to count.
 MIN_PARALLAX_RAD = math.radians(1.0)
 

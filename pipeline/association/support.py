@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.association.jcbb import chi2_quantile
+from pipeline.geometry import bearing_point
 
 #: What became of one prediction at one keyframe: the landmark got a detection ("seen"), none
 #: was in its gate ("missed"), several landmarks or detections were ("contested"), the
@@ -187,19 +188,7 @@ def misfit(
     if n < MISFIT_MIN_RAYS:
         return None
     w = 1.0 / np.asarray(var_rad2, np.float64)
-    p = np.asarray(point_fl, np.float64).copy()
-    for _ in range(10):
-        d = p - origins_fl
-        r2 = np.maximum((d**2).sum(axis=1), 1e-12)
-        jac = np.column_stack((-d[:, 1], d[:, 0])) / r2[:, None]  # d bearing / d point
-        res = wrap_rad(directions_rad - np.arctan2(d[:, 1], d[:, 0]))
-        lhs = jac.T @ (w[:, None] * jac)
-        if abs(float(np.linalg.det(lhs))) < 1e-18:
-            break
-        step = np.linalg.solve(lhs, jac.T @ (w * res))
-        p = p + step
-        if float(step @ step) < 1e-16:
-            break
+    p = bearing_point(origins_fl, directions_rad, point_fl, w, steps=10, tol=1e-16, min_det=1e-18)
     d = p - origins_fl
     stat = float(np.sum(w * wrap_rad(directions_rad - np.arctan2(d[:, 1], d[:, 0])) ** 2))
     level = 1.0 - MISFIT_RUN_RISK / max(names, 1)

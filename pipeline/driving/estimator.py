@@ -44,6 +44,7 @@ from pipeline.driving.odometry import WheelNoise, between, compose, interpolate
 from pipeline.driving.two_views import initialize_two_views
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import to_fl
+from pipeline.geometry import bearing_point
 from pipeline.joint.graph import bearing_noise, landmark_key, weak_point_prior
 from pipeline.priors import PriorName
 
@@ -170,34 +171,6 @@ def _ray_error(
     """Angle (rad) between a ray (sensor pose (3,), direction) and the direction to a point."""
     to = math.atan2(point_m[1] - sensor[1], point_m[0] - sensor[0])
     return abs(float(wrap_rad(to - direction)))
-
-
-def _least_squares_point(
-    point_m: NDArray[np.float64], rays: list[tuple[NDArray[np.float64], float]]
-) -> NDArray[np.float64]:
-    """The point (2,) that minimises the squared bearing errors of rays (sensor pose, direction),
-    by Gauss-Newton from ``point_m`` (a few steps; the start is kept if a step fails)."""
-    p = np.asarray(point_m, np.float64).copy()
-    for _ in range(5):
-        a = np.zeros((2, 2))
-        b = np.zeros(2)
-        for sensor, direction in rays:
-            dx, dy = p[0] - sensor[0], p[1] - sensor[1]
-            r2 = dx * dx + dy * dy
-            g = np.array([-dy, dx]) / r2  # d bearing / d point
-            e = float(wrap_rad(direction - math.atan2(dy, dx)))
-            a += np.outer(g, g)
-            b += g * e
-        try:
-            step = np.linalg.solve(a, b)
-        except np.linalg.LinAlgError:
-            return p
-        if not np.all(np.isfinite(step)):
-            return p
-        p = p + step
-        if float(step @ step) < 1e-12:
-            break
-    return p
 
 
 class DrivingSlam:
@@ -511,7 +484,11 @@ class DrivingSlam:
             ]
             if len(agree) < o.min_rays:
                 return f"{len(agree)} of {len(earlier)} rays agree with the two views' point"
-            point = _least_squares_point(point, [sensors[i] for i in agree])
+            point = bearing_point(
+                np.array([sensors[i][0][:2] for i in agree], np.float64),
+                np.array([sensors[i][1] for i in agree], np.float64),
+                point,
+            )
             reach = min(float(np.hypot(*(point - sd[0][:2]))) for sd in sensors)
             if not reach <= o.r_max_m:  # nearly parallel rays: no point to trust
                 return f"the rays meet farther than r_max = {o.r_max_m:g} m"
