@@ -8,7 +8,10 @@ that cannot be placed yet waits and is tried again as the map grows. Every beari
 movement becomes a bearing factor (Huber loss) or waits until its landmark enters the graph
 (rays from placed keyframes that meet with enough parallax, or a tight particle belief of the
 initializer); iSAM2 updates the map; the bearing noise is estimated from the residuals; a
-divergence check re-initializes the graph from the initializer's particles. Covariances are
+divergence check re-initializes the graph from the initializer's particles; a map stuck away
+from its optimum (a reference landmark's bearings mostly rejected, lengths that disagree with the
+driven distances) is solved again from its whole record and kept when it explains the record
+better. Covariances are
 iSAM2's marginals scaled by the estimated noise. Maths and departures from the paper:
 docs/method.md.
 
@@ -20,8 +23,8 @@ docs/method.md.
   waiting movements);
 - :mod:`pipeline.joint.mapgraph`: the graph bookkeeping (iSAM2, values, factors, bearing table,
   bootstrap batch solve, rebuild, estimates);
-- :mod:`pipeline.joint.robustness`: outlier rejection, reseating, the divergence check and
-  the rollback;
+- :mod:`pipeline.joint.robustness`: outlier rejection, reseating, the divergence check, the
+  rollback and the evidence that the map is stuck;
 - :mod:`pipeline.joint.window`: the oldest movements marginalized out of the graph once it
   holds :data:`~pipeline.joint.window.WINDOW_STRIDE` movements more than the window.
 """
@@ -56,6 +59,13 @@ from pipeline.joint.window import (
 )
 from pipeline.priors import PriorName
 from pipeline.slam import BearingSlam, MovementObservation, MovementStatus, Placement, skipped
+
+#: A map found stuck (:func:`pipeline.joint.robustness.stuck`) is solved again only once it
+#: holds this many times the movements it held at the last try (each try fits the whole record).
+MEND_GROWTH = 1.5
+#: ... and while it holds at most this many movements (a map goes wrong where it starts; a
+#: batch fit of a long record costs seconds), none of them marginalized.
+MEND_MAX_MOVEMENTS = CAREFUL_MOVEMENTS
 
 
 class JointSlam:
@@ -92,6 +102,9 @@ class JointSlam:
         As given.
     reinitializations : int
         How many times the map diverged and was re-initialized from the particles.
+    mends : list of (int, str)
+        The movements after which the map was found stuck and solved again from its whole
+        record (the solve kept), with why it was found stuck.
     """
 
     def __init__(
@@ -142,6 +155,8 @@ class JointSlam:
         self._map = MapGraph(self.settings)
         self._placer = placement.Placer(self.settings)
         self.reinitializations = 0
+        self.mends: list[tuple[int, str]] = []
+        self._mend_tried = 0  # movements placed at the last try to mend the map
 
     # ------------------------------------------------------------------ the map as it is
     @property
@@ -407,6 +422,9 @@ class JointSlam:
         robustness.reject_outliers(self._state, self._map)
         if robustness.reseat_landmarks(self._state, self._map):
             robustness.reject_outliers(self._state, self._map)
+        mended = self._mend()
+        if mended:
+            self.mends.append((obs.index, mended))
         self._map.update_estimates(self._state)
         res.estimates, res.noise = self.estimates, self._state.noise
         if obs.index in self._state.placed:
@@ -428,6 +446,48 @@ class JointSlam:
         if isinstance(started, str):
             self._state = before
         return started
+
+    def _mend(self) -> str:
+        """Solve the map again from its whole record when it looks stuck away from its optimum
+        (:func:`pipeline.joint.robustness.stuck`; tried again only as the map grows by
+        :data:`MEND_GROWTH`, up to :data:`MEND_MAX_MOVEMENTS` movements, none marginalized).
+
+        Two solves, each with every bearing back in, Levenberg-Marquardt over the whole graph,
+        then outlier rejection and reseating: one from the map as it is, one from values that
+        owe nothing to it (:func:`pipeline.joint.placement.record_values`). The one that
+        explains the record best (:func:`pipeline.joint.robustness.record_error`) replaces the
+        map if it explains it better than the map does; why the map was stuck, or empty
+        (nothing changed)."""
+        state = self._state
+        n = len(state.placed)
+        if state.frozen or n > MEND_MAX_MOVEMENTS or n < MEND_GROWTH * self._mend_tried:
+            return ""
+        why = robustness.stuck(state, self._map)
+        if not why:
+            return ""
+        self._mend_tried = n
+        best = (robustness.record_error(state, self._map), state, self._map)
+        for from_record in (False, True):
+            trial = state.copy()
+            trial.rejected = set()
+            graph = MapGraph(self.settings)
+            graph.values = self._map.values
+            graph.retable(trial)
+            values = placement.record_values(trial, graph) if from_record else graph.values
+            if values is None:
+                continue
+            graph.rebuild(trial, values)
+            robustness.reject_outliers(trial, graph)
+            if robustness.reseat_landmarks(trial, graph):
+                robustness.reject_outliers(trial, graph)
+            error = robustness.record_error(trial, graph)
+            if error < best[0]:
+                best = (error, trial, graph)
+        if best[1] is state:
+            return ""
+        self._state, self._map = best[1], best[2]
+        self._placer = placement.Placer(self.settings)  # its memory is of the map before
+        return why
 
     def _roll_back(
         self,

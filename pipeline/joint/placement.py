@@ -8,7 +8,8 @@ resection (:func:`pipeline.geometry.resect`) against the landmarks in the graph
 (:meth:`Placer.place`), chained on the previous movement's end when that one is placed; a
 movement the bearings do not determine waits, and :meth:`Placer.place_waiting` tries the waiting
 ones again as the map grows. After a divergence, :func:`values_from_beliefs` places every
-movement again against the initializer's landmark beliefs.
+movement again against the initializer's landmark beliefs; a map solved again from its whole
+record starts from :func:`record_values` (batch least squares' landmarks, movements resected).
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
+from data_schemas.errors import EstimationError
+from pipeline.batch_ls import batch_least_squares
 from pipeline.estimate import LandmarkEstimate
 from pipeline.frame_change import to_fl
 from pipeline.geometry import (
@@ -318,3 +321,27 @@ def values_from_beliefs(
     if old.exists(g.SCALE_KEY):
         values.insert(g.SCALE_KEY, old.atVector(g.SCALE_KEY))
     return values
+
+
+def record_values(state: MapState, graph: MapGraph) -> gtsam.Values | None:
+    """Initial values for the map solved again from its whole record, owing nothing to the map
+    as it is: the landmarks at batch least squares' fit of the placed movements' bearings
+    (:func:`pipeline.batch_ls.batch_least_squares`: each movement in its reference pair's
+    two-view frame, landmarks at the median of their triangulations, one least-squares solve),
+    every movement resected against them (:func:`values_from_beliefs`; a landmark the fit does
+    not place keeps its point in the graph). None when no placed movement triangulates the
+    reference pair."""
+    observations = [state.placed[k].observation() for k in sorted(state.placed)]
+    try:
+        points = batch_least_squares(
+            observations, graph.settings.landmarks, graph.settings.reference
+        )
+    except EstimationError:
+        return None
+    unit = np.eye(2)  # only the mean is read
+
+    def fitted(name: str) -> LandmarkEstimate | None:
+        p = points.get(name)
+        return None if p is None or not np.isfinite(p).all() else LandmarkEstimate(p, unit)
+
+    return values_from_beliefs(state, graph, fitted)

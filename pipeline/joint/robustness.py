@@ -5,7 +5,11 @@ that fit again are put back (:func:`reject_outliers`); a landmark that lost most
 that way is moved to where its rays meet (:func:`reseat_landmarks`). A map whose residuals are
 out of bounds or whose landmark jumped counts as diverged (:func:`divergence`); when
 re-initialization does not bring it back, the map returns to the :class:`Snapshot` taken before
-the movement (:func:`roll_back`). Every function takes the map's state and graph as arguments.
+the movement (:func:`roll_back`). A map whose own record says it is stuck away from its optimum
+(:func:`stuck`: a reference landmark's bearings mostly rejected, or movement lengths that
+disagree with the driven distances) is solved again from the whole record by the estimator, and
+the solve kept when its :func:`record_error` is lower. Every function takes the map's state and
+graph as arguments.
 """
 
 from __future__ import annotations
@@ -38,6 +42,14 @@ MAX_REJECT_FRACTION = 0.1
 #: A landmark with at least this many rejected bearings, and more rejected than kept, is put
 #: where its rays meet (its first estimate was wrong, not its bearings).
 RESEAT_MIN_REJECTED = 3
+#: A reference landmark with at least this many bearings in the map, more than half of them
+#: rejected, leaves the map's frame resting on bearings that do not fit it: the map is stuck.
+STUCK_MIN_REFERENCE_BEARINGS = 6
+#: With the distance prior, at least this many movements with a driven distance whose lengths
+#: in the map disagree with it by a median of more than :data:`STUCK_DISTANCE_SIGMAS` times the
+#: prior's relative std (in log length, about the map's scale): the map's unit is stuck.
+STUCK_MIN_DISTANCES = 3
+STUCK_DISTANCE_SIGMAS = 3.0
 
 
 def reject_outliers(state: MapState, graph: MapGraph) -> None:
@@ -95,6 +107,57 @@ def reseat_landmarks(state: MapState, graph: MapGraph) -> list[str]:
     if values is not None:
         graph.rebuild(state, values)
     return moved
+
+
+def stuck(state: MapState, graph: MapGraph) -> str:
+    """Why the map looks stuck away from its optimum, from its own record (empty if it does
+    not): a reference landmark with at least :data:`STUCK_MIN_REFERENCE_BEARINGS` bearings in
+    the map, more than half of them rejected (the gauge holds it where its bearings say it is
+    not), or, with the distance prior, movement lengths that disagree with their driven
+    distances (:func:`unit_misfit`)."""
+    table, settings = graph.table, graph.settings
+    for name, j in zip(settings.reference, settings.reference_indices(), strict=True):
+        own = table.landmark == j
+        n, n_out = int(own.sum()), int((own & table.rejected).sum())
+        if n >= STUCK_MIN_REFERENCE_BEARINGS and 2 * n_out > n:
+            return f"{n_out} of {n} bearings of the reference landmark {name} rejected"
+    misfit_log = unit_misfit(state, graph)
+    rel = settings.distance_prior_rel
+    if rel is not None and misfit_log > STUCK_DISTANCE_SIGMAS * rel:
+        return (
+            f"movement lengths disagree with the driven distances by {misfit_log:.2f} in log "
+            f"(median; the prior's std is {rel:g})"
+        )
+    return ""
+
+
+def unit_misfit(state: MapState, graph: MapGraph) -> float:
+    """Median absolute difference, in log length, between the placed movements' lengths in
+    the map (FL) and their driven distances times the map's scale (FL per metre), over the
+    movements with a distance (0 with fewer than :data:`STUCK_MIN_DISTANCES` of them, or
+    without the distance prior)."""
+    if not graph.has(g.SCALE_KEY):
+        return 0.0
+    log_scale = float(graph.values.atVector(g.SCALE_KEY)[0])
+    off = []
+    for k, m in state.placed.items():
+        d = graph.distance_m(m)
+        if d is not None:
+            off.append(math.log(graph.movement_pose(k).length_fl) - log_scale - math.log(d))
+    if len(off) < STUCK_MIN_DISTANCES:
+        return 0.0
+    return float(np.median(np.abs(off)))
+
+
+def record_error(state: MapState, graph: MapGraph) -> float:
+    """The graph's error at the map as it is with every bearing of the placed movements in it,
+    the rejected ones too (each through the bearing factors' Huber loss): how well the map
+    explains its whole record, comparable between two maps of the same state."""
+    every = state.copy()
+    every.rejected = set()
+    scratch = MapGraph(graph.settings)  # full_graph records factor positions: not in ``graph``
+    values = graph.values
+    return float(scratch.full_graph(every, values).error(values))
 
 
 def jumped(state: MapState, graph: MapGraph, before: dict[str, LandmarkEstimate]) -> str:
