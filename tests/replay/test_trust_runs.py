@@ -60,8 +60,8 @@ def test_a_map_whose_reference_bearings_miss_it_is_not_trustworthy(
 
 def test_the_same_map_solved_again_from_its_record_is_trusted(tmp_path: Path) -> None:
     # the same run as the estimator processes it: the map is found stuck after movement 5 and
-    # solved again from its record (tests/replay/test_joint_mend_run.py); the bearings of L2
-    # recorded before are beyond 2 eps, a few of its 27, not most
+    # solved again from its record (tests/replay/test_joint_mend_run.py); L2's bearings
+    # recorded before that (movements 2-4) are beyond 2 eps: 5 of its 25, not most
     scenario, summary = _run("coded", 9024, tmp_path)
     assert max(_errors_m(scenario, summary).values()) < 0.06
     assert summary["trust"] == {"trustworthy": True}
