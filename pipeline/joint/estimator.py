@@ -420,7 +420,7 @@ class JointSlam:
             if still:
                 return self._roll_back(res, snap, m, divergence, still)
         robustness.reject_outliers(self._state, self._map)
-        if robustness.reseat_landmarks(self._state, self._map):
+        if robustness.reseat_landmarks(self._state, self._map, self.paper.noise.r_max):
             robustness.reject_outliers(self._state, self._map)
         mended = self._mend()
         if mended:
@@ -478,7 +478,7 @@ class JointSlam:
                 continue
             graph.rebuild(trial, values)
             robustness.reject_outliers(trial, graph)
-            if robustness.reseat_landmarks(trial, graph):
+            if robustness.reseat_landmarks(trial, graph, self.paper.noise.r_max):
                 robustness.reject_outliers(trial, graph)
             error = robustness.record_error(trial, graph)
             if error < best[0]:

@@ -2,7 +2,8 @@
 
 After each update the bearings far from the map are taken out of the graph and rejected ones
 that fit again are put back (:func:`reject_outliers`); a landmark that lost most of its bearings
-that way is moved to where its rays meet (:func:`reseat_landmarks`). A map whose residuals are
+that way, or that lost some and stands out of every vision cone's reach, is moved to where its
+rays meet (:func:`reseat_landmarks`). A map whose residuals are
 out of bounds or whose landmark jumped counts as diverged (:func:`divergence`); when
 re-initialization does not bring it back, the map returns to the :class:`Snapshot` taken before
 the movement (:func:`roll_back`). A map whose own record says it is stuck away from its optimum
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 
 import gtsam
 import numpy as np
+from numpy.typing import NDArray
 
 from data_schemas.angles import wrap_rad
 from pipeline.estimate import LandmarkEstimate
@@ -40,8 +42,9 @@ REJECT_EPS = 2.0
 READMIT_EPS = 1.5
 #: More than this fraction of the bearings beyond REJECT_EPS eps: the map is wrong, not them.
 MAX_REJECT_FRACTION = 0.1
-#: A landmark with at least this many rejected bearings, and more rejected than kept, is put
-#: where its rays meet (its first estimate was wrong, not its bearings).
+#: A landmark with at least this many rejected bearings, and more rejected than kept (or out
+#: of reach, :func:`out_of_reach`), is put where its rays meet (its estimate is wrong, not its
+#: bearings).
 RESEAT_MIN_REJECTED = 3
 #: A reference landmark with at least this many bearings in the map, more than half of them
 #: rejected, leaves the map's frame resting on bearings that do not fit it: the map is stuck.
@@ -68,10 +71,36 @@ def reject_outliers(state: MapState, graph: MapGraph) -> None:
         graph.set_rejected(state, out, back)
 
 
-def reseat_landmarks(state: MapState, graph: MapGraph) -> list[str]:
+def out_of_reach(
+    points_fl: NDArray[np.float64],
+    ends_fl: NDArray[np.float64],
+    starts_fl: NDArray[np.float64],
+    r_max: float,
+) -> bool:
+    """Whether a landmark stands beyond every vision cone that holds it: farther than ``r_max``
+    movement lengths (the impartial prior's range bound, :data:`pipeline.priors.R_MAX_FR`)
+    from the keyframe of each of its bearings.
+
+    Parameters
+    ----------
+    points_fl : (k, 2) array
+        The landmark's point (FL), once per bearing.
+    ends_fl, starts_fl : (k, 2) arrays
+        Each bearing's keyframe position and the other end of its movement (FL).
+    r_max : float
+        Range bound in movement lengths.
+    """
+    range_fl = np.hypot(*(points_fl - ends_fl).T)
+    length_fl = np.hypot(*(ends_fl - starts_fl).T)
+    return bool((range_fl > r_max * length_fl).all())
+
+
+def reseat_landmarks(state: MapState, graph: MapGraph, r_max: float) -> list[str]:
     """Landmarks moved to where their rays meet, when most of their bearings were rejected
-    (the landmark is wrong, not its bearings: it entered from a poor first estimate); the
-    map is then rebuilt with those bearings back in."""
+    (the landmark is wrong, not its bearings: it entered from a poor first estimate), or when
+    some were and it stands beyond the reach of every cone that holds it (:func:`out_of_reach`
+    with ``r_max`` movement lengths: impossible under the impartial prior, a map that ran away
+    along near-parallel rays); the map is then rebuilt with those bearings back in."""
     settings, table = graph.settings, graph.table
     eps = settings.eps_rad
     n_out_of = np.bincount(table.landmark[table.rejected], minlength=len(settings.landmarks))
@@ -84,12 +113,18 @@ def reseat_landmarks(state: MapState, graph: MapGraph) -> list[str]:
     moved = []
     for j, out_j in n_rejected.items():
         n_out = int(out_j.sum())
-        if n_out < RESEAT_MIN_REJECTED or n_out <= n_rows[j].size - n_out:
+        if n_out < RESEAT_MIN_REJECTED:
             continue
         name = settings.landmarks[j]
         own = table.select(table.landmark == j)
         poses = [graph.values.atPose2(g.pose_key(b.movement, b.end)) for b in own]
         origins = np.array([(p.x(), p.y()) for p in poses], np.float64)
+        if n_out <= n_rows[j].size - n_out:
+            others = [graph.values.atPose2(g.pose_key(b.movement, 1 - b.end)) for b in own]
+            starts = np.array([(p.x(), p.y()) for p in others], np.float64)
+            point = np.broadcast_to(graph.values.atPoint2(graph.key(name)), origins.shape)
+            if not out_of_reach(point, origins, starts, r_max):
+                continue
         headings = np.array([p.theta() for p in poses], np.float64)
         bearings = np.array([b.bearing_rad for b in own], np.float64)
         fix = intersect_rays(origins, headings + bearings, REJECT_EPS * eps)

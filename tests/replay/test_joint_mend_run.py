@@ -1,4 +1,5 @@
-"""A joint map stuck on its bootstrap is solved again from its record, on a real simulated log.
+"""A joint map stuck on its bootstrap is solved again from its record, and a landmark run away
+out of every cone's reach is put back where its rays meet, on real simulated logs.
 
 Eight coded landmarks, seed 9024 (replay/experiments/families.py): the first movement sees the
 reference pair L1, L2 almost straight ahead (parallax about 1 degree from both ends), the map
@@ -6,6 +7,11 @@ starts with a unit of length less than half the true one, and from then on most 
 are rejected; the map ends with every landmark 1.3-2.6 m off while batch least squares of the
 same bearings is within 3 cm. The oracle is the scenario's true layout sent by hand into the
 frame where L1 = (0, 0) and L2 = (1, 0) (complex numbers), scaled by |L1 L2| in metres.
+
+Corridor, seed 9521: L5 is seen along near-parallel rays down the corridor; a re-initialization
+after movement 5 sends it about 350 m out, where its rays cannot reach (r_max movement lengths),
+and there it stays with 17 of its 37 bearings rejected (not most, so it was never reseated),
+while batch least squares of the same bearings puts it within 8 cm.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ import numpy as np
 import pytest
 
 from pipeline.estimators import make_estimator
+from pipeline.joint import robustness
 from pipeline.joint.estimator import JointSlam
 from pipeline.slam import MovementObservation
 from replay import defaults
@@ -27,14 +34,16 @@ pytestmark = pytest.mark.slow
 SEED = 9024
 
 
-def _run(doc: dict[str, Any], observations: list[MovementObservation]) -> tuple[Any, list[Any]]:
+def _run(
+    doc: dict[str, Any], observations: list[MovementObservation], seed: int = SEED
+) -> tuple[Any, list[Any]]:
     names = [lm["name"] for lm in doc["landmarks"]]
     slam = make_estimator(
         "joint",
         names,
-        ("L1", "L2"),
+        (doc["reference"][0], doc["reference"][1]),
         vision_error_rad=math.radians(float(doc["vision_error_deg"])),
-        rng=np.random.default_rng(SEED),
+        rng=np.random.default_rng(seed),
         prior="impartial",
         n_r=defaults.N_R,
         n_l=defaults.N_L,
@@ -87,3 +96,21 @@ def test_a_map_stuck_on_its_bootstrap_is_solved_again_and_lands_on_the_truth(
     assert min(_errors_m(doc, stuck).values()) > 1.0
     far, n = _l2_far(stuck_results, eps)
     assert 2 * far > n
+
+
+def test_a_landmark_run_away_out_of_reach_is_put_back_where_its_rays_meet(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    seed = 9521
+    doc, observations = observe_run("long", seed)
+    assert doc["reference"] == ["L1", "L2"]
+
+    slam, _ = _run(doc, observations, seed)
+    errors = _errors_m(doc, slam)
+    assert len(errors) == 4
+    assert max(errors.values()) < 0.20, errors  # LS: 8 and 16 cm for L5, L6
+
+    with monkeypatch.context() as m:  # the same log without the reach test: L5 runs away
+        m.setattr(robustness, "out_of_reach", lambda *args: False)
+        away, _ = _run(doc, observations, seed)
+    assert _errors_m(doc, away)["L5"] > 10.0
