@@ -45,6 +45,7 @@ def joint_fields(result: MovementResult) -> dict[str, Any]:
         "residuals_rad": dict(result.residuals_rad),
         "bearing_noise_rad": None if result.noise is None else result.noise.sigma_rad,
         "divergence": result.divergence,
+        "solved_again": result.solved_again,
         "map_unit_m": result.unit_m,
         "also_placed": tuple(result.also_placed),
     }

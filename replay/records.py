@@ -214,6 +214,9 @@ class MovementRecord:
         Joint estimator: bearing noise std estimated from every residual of the map.
     divergence : str
         Joint estimator: why the map was re-initialized from the particles, if it was.
+    solved_again : str
+        Joint estimator: why the map was found stuck and solved again from its whole record,
+        if it was.
     map_unit_m : float or None
         Joint estimator with the distance prior: the map's unit |L1 L2| in metres, estimated
         from the driven distances.
@@ -263,6 +266,7 @@ class MovementRecord:
     residuals_rad: Mapping[str, tuple[float | None, float | None]] = field(default_factory=dict)
     bearing_noise_rad: float | None = None
     divergence: str = ""
+    solved_again: str = ""
     map_unit_m: float | None = None
     ambiguous_landmarks: Mapping[str, str] = field(default_factory=dict)
     also_placed: tuple[int, ...] = ()

@@ -425,6 +425,7 @@ class JointSlam:
         mended = self._mend()
         if mended:
             self.mends.append((obs.index, mended))
+            res.solved_again = mended
         self._map.update_estimates(self._state)
         res.estimates, res.noise = self.estimates, self._state.noise
         if obs.index in self._state.placed:

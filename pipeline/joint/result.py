@@ -28,6 +28,9 @@ class JointMovementResult(MovementResult):
         Bearing noise estimated from every residual of the map.
     divergence : str
         Empty, or why the map was re-initialized from the particles this movement.
+    solved_again : str
+        Empty, or why the map was found stuck away from its optimum after this movement and
+        replaced by a solve of its whole record.
     unit_m : float or None
         The map's unit |L1 L2| in metres, estimated from the driven distances (None without
         the distance prior, or before a movement with a distance is in the map).
@@ -38,4 +41,5 @@ class JointMovementResult(MovementResult):
     residuals_rad: dict[str, tuple[float | None, float | None]] = field(default_factory=dict)
     noise: NoiseEstimate | None = None
     divergence: str = ""
+    solved_again: str = ""
     unit_m: float | None = None

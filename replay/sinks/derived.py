@@ -93,6 +93,8 @@ def _joint_fields(record: MovementRecord) -> dict[str, Any]:
         out["bearing_noise_rad"] = record.bearing_noise_rad
     if record.divergence:
         out["divergence"] = record.divergence
+    if record.solved_again:
+        out["solved_again"] = record.solved_again
     if record.also_placed:
         out["also_placed"] = list(record.also_placed)
     if record.residuals_rad:

@@ -321,6 +321,9 @@ class RerunSink:
             self._text(f"movement {record.index}: placed by {record.placement}", "INFO")
         if record.divergence:
             self._text(f"movement {record.index}: map re-initialized: {record.divergence}", "WARN")
+        if record.solved_again:
+            why = record.solved_again
+            self._text(f"movement {record.index}: map stuck ({why}), solved again", "WARN")
         res = [r for pair in record.residuals_rad.values() for r in pair if r is not None]
         if res:
             rms_deg = math.degrees(math.sqrt(np.mean(np.square(res))))

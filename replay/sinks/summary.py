@@ -6,8 +6,9 @@ map (FL, unit |L1 L2|; the reference pair is the frame, so it is not listed). Fo
 ``truth`` gives the true positions in FL and ``error_m`` the distance of each estimate to them.
 With the joint estimator a movement also carries its ``placement`` (``reference pair`` or
 ``resection``), its bearing ``residuals_deg`` and the ``bearing_noise_deg`` estimated so far (and
-``divergence`` when the map was re-initialized); the document ends with the final
-``bearing_noise_deg`` and the number of ``reinitializations``.
+``divergence`` when the map was re-initialized, ``solved_again`` when it was found stuck and
+solved again from its whole record); the document ends with the final ``bearing_noise_deg``
+and the numbers of ``reinitializations`` and of maps ``solved_again``.
 ``ambiguous_classes`` (class -> landmarks) lists the classes several catalog landmarks share;
 their landmarks are named by association (``red#1``, ... in order of confirmation,
 :mod:`pipeline.association`). ``movements[k].ambiguous_landmarks`` (key -> reason) is what
@@ -223,6 +224,7 @@ class SummarySink:
         self._noise_rad: float | None = None
         self._unit_m: float | None = None
         self._reinitializations = 0
+        self._solved_again = 0
         self._matched: dict[str, str] = {}
         self._doubtful: dict[str, str] = {}
         self._unconfirmed: dict[str, str] = {}
@@ -293,6 +295,9 @@ class SummarySink:
         if record.divergence:
             entry["divergence"] = record.divergence
             self._reinitializations += 1
+        if record.solved_again:
+            entry["solved_again"] = record.solved_again
+            self._solved_again += 1
         if record.ambiguous_landmarks:
             entry["ambiguous_landmarks"] = dict(record.ambiguous_landmarks)
             self._unresolved.append(record.index)
@@ -370,6 +375,7 @@ class SummarySink:
             noise_deg = round(math.degrees(self._noise_rad), 6)
             self.document["bearing_noise_deg"] = noise_deg
             self.document["reinitializations"] = self._reinitializations
+            self.document["solved_again"] = self._solved_again
         if self._errors_m:
             mean_error_m = _num(float(np.mean(list(self._errors_m.values()))))
             self.document["error_m"] = {k: _num(v) for k, v in self._errors_m.items()}

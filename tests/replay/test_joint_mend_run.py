@@ -16,11 +16,14 @@ while batch least squares of the same bearings puts it within 8 cm.
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from pipeline.estimators import make_estimator
 from pipeline.joint import robustness
@@ -28,6 +31,10 @@ from pipeline.joint.estimator import JointSlam
 from pipeline.slam import MovementObservation
 from replay import defaults
 from replay.experiments.calibration import observe_run
+from replay.experiments.families import family_scenario
+from replay.experiments.run import simulate
+from replay.process import process_log
+from replay.records import MethodConfig
 
 pytestmark = pytest.mark.slow
 
@@ -114,3 +121,21 @@ def test_a_landmark_run_away_out_of_reach_is_put_back_where_its_rays_meet(
         m.setattr(robustness, "out_of_reach", lambda *args: False)
         away, _ = _run(doc, observations, seed)
     assert _errors_m(doc, away)["L5"] > 10.0
+
+
+def test_a_map_solved_again_says_so_in_the_summary_and_the_derived_log(tmp_path: Path) -> None:
+    # the log of seed 9024 processed as a user would (joint estimator, its defaults)
+    log, out = tmp_path / "coded.mcap", tmp_path / "coded.derived.mcap"
+    simulate(family_scenario("coded", SEED), log, seed=SEED)
+    doc = process_log(log, MethodConfig(seed=SEED), out=out).to_json()
+    said = {m["index"]: m["solved_again"] for m in doc["movements"] if "solved_again" in m}
+    assert said and all("of the reference landmark L2 rejected" in why for why in said.values())
+    assert doc["solved_again"] == len(said)
+    assert doc["trust"]["trustworthy"], doc["trust"]
+    with out.open("rb") as f:
+        estimates = [
+            json.loads(m.data)
+            for _, c, m in make_reader(f).iter_messages()
+            if c.topic == "/pipeline/estimate"
+        ]
+    assert {k: e["solved_again"] for k, e in enumerate(estimates) if "solved_again" in e} == said
