@@ -19,7 +19,7 @@ import numpy as np
 
 from data_schemas.errors import EstimationError
 from pipeline.batch_ls import batch_least_squares
-from pipeline.estimators import make_estimator
+from pipeline.estimators import Estimator, make_estimator
 from pipeline.slam import MovementObservation
 from replay import defaults
 from replay.experiments.families import family_scenario
@@ -78,18 +78,13 @@ def observe_run(family: str, seed: int) -> tuple[dict[str, Any], list[MovementOb
     return doc, observations
 
 
-def score_observations(
-    doc: dict[str, Any], observations: list[MovementObservation], family: str, seed: int
-) -> list[LandmarkScore]:
-    """Run the joint estimator and batch least squares on a run's bearings; score its final map."""
-    reference = (doc["reference"][0], doc["reference"][1])
-    truth = truth_from_scenario(doc, reference)
-    truth_fl, scale_cm = truth.landmarks_fl(), 100.0 * truth.to_fl.unit_m
-    names = [lm["name"] for lm in doc["landmarks"]]
-    slam = make_estimator(
+def family_estimator(doc: dict[str, Any], seed: int) -> Estimator:
+    """The joint estimator as the calibration figures run it on a family's scenario ``doc``:
+    replay's defaults (impartial prior, distance prior, window), seeded with ``seed``."""
+    return make_estimator(
         "joint",
-        names,
-        reference,
+        [lm["name"] for lm in doc["landmarks"]],
+        (doc["reference"][0], doc["reference"][1]),
         vision_error_rad=math.radians(float(doc["vision_error_deg"])),
         rng=np.random.default_rng(seed),
         prior="impartial",
@@ -99,6 +94,17 @@ def score_observations(
         distance_prior_rel=defaults.DISTANCE_PRIOR_REL,
         window=defaults.JOINT_WINDOW,
     )
+
+
+def score_observations(
+    doc: dict[str, Any], observations: list[MovementObservation], family: str, seed: int
+) -> list[LandmarkScore]:
+    """Run the joint estimator and batch least squares on a run's bearings; score its final map."""
+    reference = (doc["reference"][0], doc["reference"][1])
+    truth = truth_from_scenario(doc, reference)
+    truth_fl, scale_cm = truth.landmarks_fl(), 100.0 * truth.to_fl.unit_m
+    names = [lm["name"] for lm in doc["landmarks"]]
+    slam = family_estimator(doc, seed)
     for obs in observations:
         slam.process_movement(obs)
     try:

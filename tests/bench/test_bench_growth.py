@@ -39,20 +39,20 @@ import os
 import statistics
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import gtsam
 import numpy as np
 import pytest
+from bench_runs import scattered_run, with_distances
 
 from pipeline.joint.estimator import JointSlam
 from pipeline.joint.mapgraph import MapGraph
 from pipeline.joint.state import JointSettings
 from pipeline.joint.window import DEFAULT_WINDOW
 from pipeline.slam import MovementObservation
-from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, scatter_landmarks, simulate_bearings
+from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, simulate_bearings
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pipeline"))
 from alike_synthetic import run_synthetic
@@ -67,23 +67,8 @@ def _run(n_movements: int, n_landmarks: int, seed: int) -> SimulatedRun:
     if n_landmarks == 4:
         run = simulate_bearings(n_movements, rng, eps_rad=EPS)
     else:
-        ref = {"L1": (1.2, 1.7), "L2": (1.8, 1.7)}
-        pts = scatter_landmarks(rng, ref, n_landmarks, (0.05, 0.05), (2.95, 1.95), 0.12)
-        run = simulate_bearings(
-            n_movements,
-            rng,
-            eps_rad=EPS,
-            sigma_frac=1 / 3,
-            landmarks_world=pts,
-            arena_m=(3.0, 2.0),
-            move_m=(0.3, 0.6),
-        )
-    lengths = np.hypot(*(run.o2_world - run.o1_world).T)
-    obs = [
-        replace(o, distance_m=float(d * (1.0 + rng.normal(0.0, 0.02))))
-        for o, d in zip(run.observations, lengths, strict=True)
-    ]
-    return replace(run, observations=obs)
+        run = scattered_run(n_movements, n_landmarks, rng, EPS, 0.12)
+    return with_distances(run, rng)
 
 
 def _slam(run: SimulatedRun, seed: int, window: int | None = DEFAULT_WINDOW) -> JointSlam:

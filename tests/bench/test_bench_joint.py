@@ -16,10 +16,11 @@ import time
 
 import numpy as np
 import pytest
+from bench_runs import scattered_run
 
 from pipeline.joint.estimator import JointSlam
 from pipeline.slam import BearingSlam, MovementObservation, MovementResult
-from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, scatter_landmarks, simulate_bearings
+from pipeline.synthetic import PAPER_REFERENCE, SimulatedRun, simulate_bearings
 
 EPS = math.radians(3.0)
 ROUNDS = 5
@@ -28,18 +29,7 @@ ROUNDS = 5
 def _run(n_landmarks: int, seed: int) -> SimulatedRun:
     if n_landmarks == 4:
         return simulate_bearings(10, np.random.default_rng(seed), eps_rad=EPS)
-    rng = np.random.default_rng(seed)
-    ref = {"L1": (1.2, 1.7), "L2": (1.8, 1.7)}
-    pts = scatter_landmarks(rng, ref, n_landmarks, (0.05, 0.05), (2.95, 1.95), 0.12)
-    return simulate_bearings(
-        10,
-        rng,
-        eps_rad=EPS,
-        sigma_frac=1 / 3,
-        landmarks_world=pts,
-        arena_m=(3.0, 2.0),
-        move_m=(0.3, 0.6),
-    )
+    return scattered_run(10, n_landmarks, np.random.default_rng(seed), EPS, 0.12)
 
 
 def _timed_paper(slam: BearingSlam, spent: list[float]) -> None:

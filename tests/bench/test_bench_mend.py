@@ -17,14 +17,14 @@ from __future__ import annotations
 import math
 import statistics
 import time
-from dataclasses import replace
 
 import numpy as np
 import pytest
+from bench_runs import scattered_run, with_distances
 
 from pipeline.joint import robustness
 from pipeline.joint.estimator import JointSlam
-from pipeline.synthetic import SimulatedRun, scatter_landmarks, simulate_bearings
+from pipeline.synthetic import SimulatedRun
 
 EPS = math.radians(3.0)
 ROUNDS = 3
@@ -34,23 +34,7 @@ MOVEMENTS = 40
 
 def _run(seed: int) -> SimulatedRun:
     rng = np.random.default_rng(seed)
-    ref = {"L1": (1.2, 1.7), "L2": (1.8, 1.7)}
-    pts = scatter_landmarks(rng, ref, 12, (0.05, 0.05), (2.95, 1.95), 0.15)
-    run = simulate_bearings(
-        MOVEMENTS,
-        rng,
-        eps_rad=EPS,
-        sigma_frac=1 / 3,
-        landmarks_world=pts,
-        arena_m=(3.0, 2.0),
-        move_m=(0.3, 0.6),
-    )
-    lengths = np.hypot(*(run.o2_world - run.o1_world).T)
-    obs = [
-        replace(o, distance_m=float(d * (1.0 + rng.normal(0.0, 0.02))))
-        for o, d in zip(run.observations, lengths, strict=True)
-    ]
-    return replace(run, observations=obs)
+    return with_distances(scattered_run(MOVEMENTS, 12, rng, EPS, 0.15), rng)
 
 
 def _cpu_s(run: SimulatedRun, seed: int) -> tuple[float, int]:

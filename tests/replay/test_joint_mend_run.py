@@ -21,16 +21,13 @@ import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from pipeline.estimators import make_estimator
 from pipeline.joint import robustness
 from pipeline.joint.estimator import JointSlam
 from pipeline.slam import MovementObservation
-from replay import defaults
-from replay.experiments.calibration import observe_run
+from replay.experiments.calibration import family_estimator, observe_run
 from replay.experiments.families import family_scenario
 from replay.experiments.run import simulate
 from replay.process import process_log
@@ -44,20 +41,7 @@ SEED = 9024
 def _run(
     doc: dict[str, Any], observations: list[MovementObservation], seed: int = SEED
 ) -> tuple[Any, list[Any]]:
-    names = [lm["name"] for lm in doc["landmarks"]]
-    slam = make_estimator(
-        "joint",
-        names,
-        (doc["reference"][0], doc["reference"][1]),
-        vision_error_rad=math.radians(float(doc["vision_error_deg"])),
-        rng=np.random.default_rng(seed),
-        prior="impartial",
-        n_r=defaults.N_R,
-        n_l=defaults.N_L,
-        turn_prior_sigma_rad=None,
-        distance_prior_rel=defaults.DISTANCE_PRIOR_REL,
-        window=defaults.JOINT_WINDOW,
-    )
+    slam = family_estimator(doc, seed)
     return slam, [slam.process_movement(o) for o in observations]
 
 
