@@ -9,8 +9,8 @@ re-initialization does not bring it back, the map returns to the :class:`Snapsho
 the movement (:func:`roll_back`). A map whose own record says it is stuck away from its optimum
 (:func:`stuck`: a reference landmark's bearings mostly rejected, or movement lengths that
 disagree with the driven distances) is solved again from the whole record by the estimator, and
-the solve kept when its :func:`record_error` is lower. Every function takes the map's state and
-graph as arguments.
+the solve kept when its :func:`record_error` is lower. Every function but :func:`out_of_reach`
+(points in, a verdict out) takes the map's state and graph as arguments.
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ def reject_outliers(state: MapState, graph: MapGraph) -> None:
 
 
 def out_of_reach(
-    points_fl: NDArray[np.float64],
+    point_fl: NDArray[np.float64],
     ends_fl: NDArray[np.float64],
     starts_fl: NDArray[np.float64],
     r_max: float,
@@ -83,14 +83,14 @@ def out_of_reach(
 
     Parameters
     ----------
-    points_fl : (k, 2) array
-        The landmark's point (FL), once per bearing.
+    point_fl : (2,) array
+        The landmark's point (FL).
     ends_fl, starts_fl : (k, 2) arrays
         Each bearing's keyframe position and the other end of its movement (FL).
     r_max : float
         Range bound in movement lengths.
     """
-    range_fl = np.hypot(*(points_fl - ends_fl).T)
+    range_fl = np.hypot(*(point_fl - ends_fl).T)
     length_fl = np.hypot(*(ends_fl - starts_fl).T)
     return bool((range_fl > r_max * length_fl).all())
 
@@ -122,7 +122,7 @@ def reseat_landmarks(state: MapState, graph: MapGraph, r_max: float) -> list[str
         if n_out <= n_rows[j].size - n_out:
             others = [graph.values.atPose2(g.pose_key(b.movement, 1 - b.end)) for b in own]
             starts = np.array([(p.x(), p.y()) for p in others], np.float64)
-            point = np.broadcast_to(graph.values.atPoint2(graph.key(name)), origins.shape)
+            point = np.asarray(graph.values.atPoint2(graph.key(name)), np.float64)
             if not out_of_reach(point, origins, starts, r_max):
                 continue
         headings = np.array([p.theta() for p in poses], np.float64)
