@@ -30,6 +30,14 @@ def _simulated(camera: str, seed: int, folder: Path) -> tuple[Path, Score]:
     return log, score_log(log)
 
 
+def _arena_scored(n: int, size_m: tuple[float, float], seed: int, folder: Path) -> Score:
+    """Simulate ``n`` identical landmarks in an arena of ``size_m`` drawn from ``seed`` (omni
+    camera) into ``folder``; score it."""
+    log = folder / "run.mcap"
+    simulate(alike_arena(n, "omni", size_m, seed=seed), log, seed=seed)
+    return score_log(log)
+
+
 def _off_names(camera: str, seed: int, folder: Path) -> tuple[Path, Score, set[str]]:
     """A simulated run whose layout fools the confirmation: its names more than 10 cm off in
     the last movement's map (before anything is retracted once the log is processed)."""
@@ -475,9 +483,7 @@ def test_a_map_broken_by_names_of_mixed_rays_is_mended_once_the_log_is_processed
     # and 7 names 11 cm to 2.4 m off and 61 % and 48 % of the detections right. Associating
     # with the final map and solving it again in turn puts every name within 10 cm of its
     # landmark (the truth measured directly) and names 9 in 10 detections right or more
-    log = tmp_path / "run.mcap"
-    simulate(alike_arena(12, "omni", (4.0, 3.0), seed=seed), log, seed=seed)
-    s = score_log(log)
+    s = _arena_scored(12, (4.0, 3.0), seed, tmp_path)
     assert s.n_named == 12 and len(set(s.matched.values())) == 12
     assert max(s.errors_m.values()) <= 0.10, s.errors_m
     right, detections = s.n_final_correct, s.n_final_detections
@@ -495,9 +501,7 @@ def test_the_name_the_final_map_supports_least_goes_to_the_landmark_it_kept_out(
     # before: blue#13, 3 cm off) and the ghost stayed 2.2 m off; 78 % of the detections right.
     # Retracting the name the final map supports least, when the point explains more
     # detections than it, puts that name on the landmark (the truth measured directly)
-    log = tmp_path / "run.mcap"
-    simulate(alike_arena(16, "omni", (5.0, 4.0), seed=4), log, seed=4)
-    s = score_log(log)
+    s = _arena_scored(16, (5.0, 4.0), 4, tmp_path)
     retracted = _retracted_at_end(s)
     assert len(retracted) == 1, retracted
     ((name, why),) = retracted.items()
@@ -518,9 +522,7 @@ def test_a_map_broken_during_the_run_is_built_again_from_the_first_movement(
     # 82 % of the detections right (main before). Built again from the first movement with the
     # final association's names, no mixed name enters early: every name the map holds is
     # within 20 cm of its landmark (the truth measured directly), at least 85 % right
-    log = tmp_path / "run.mcap"
-    simulate(alike_arena(16, "omni", (5.0, 4.0), seed=6), log, seed=6)
-    s = score_log(log)
+    s = _arena_scored(16, (5.0, 4.0), 6, tmp_path)
     assert max(s.errors_last_m.values()) > 1.0, s.errors_last_m  # broken during the run
     assert max(s.errors_m.values()) <= 0.20, s.errors_m
     right, detections = s.n_final_correct, s.n_final_detections
