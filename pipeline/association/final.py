@@ -44,10 +44,13 @@ from pipeline.association.hypotheses import (
 )
 from pipeline.association.jcbb import assign_jointly, own_to_fl
 from pipeline.association.lifecycle import (
+    DISCOVER_FAN_KEYFRAMES,
+    DISCOVER_FAN_SEEN_SHARE,
     DISCOVER_KEYFRAMES,
     DISCOVER_LINES,
     DISCOVER_MOVEMENTS,
     Lifecycle,
+    seen_in_gate,
 )
 from pipeline.association.predict import (
     GATE_CHI2,
@@ -513,7 +516,7 @@ def repair_final(
         full = len(names.named[label]) >= count
         given = len(out.confirmed)
         rays = unexplained_rays(final, label, poses)
-        while (found := _final_point(names, label, rays, mapped)) is not None:
+        while (found := _final_point(names, label, rays, mapped, final, poses)) is not None:
             h, lines = found
             out.names.setdefault(label, ([], []))
             if full:
@@ -570,7 +573,7 @@ def _rebuild(
         found: list[tuple[Hypothesis, int]] = []
         while (
             len(found) < len(suspected)
-            and (f := _final_point(names, label, rays, mapped, apart_from=suspected)) is not None
+            and (f := _final_point(names, label, rays, mapped, final, poses, suspected)) is not None
         ):
             found.append(f)
             rays = [r for r in rays if (r.movement, r.end, r.detection) not in f[0].keys]
@@ -631,6 +634,8 @@ def _final_point(
     label: str,
     rays: Sequence[Ray],
     mapped: Mapping[str, LandmarkEstimate],
+    final: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
     apart_from: Collection[str] = (),
 ) -> tuple[Hypothesis, int] | None:
     """Where ``rays`` (unexplained by the final map) meet as the search names a landmark:
@@ -638,13 +643,21 @@ def _final_point(
     :data:`~pipeline.association.lifecycle.DISCOVER_LINES` lines of sight over
     :data:`~pipeline.association.lifecycle.DISCOVER_MOVEMENTS` movements, every ray within
     eps, not a named landmark seen again (mostly its rays and within :data:`FINAL_APART_CHI2`
-    of it); the fitted point and its lines of sight, or None."""
+    of it); or, for a landmark seen from a narrow fan, one line of sight fewer from
+    :data:`~pipeline.association.lifecycle.DISCOVER_FAN_KEYFRAMES` keyframes, its class
+    detected in the gate at :data:`~pipeline.association.lifecycle.DISCOVER_FAN_SEEN_SHARE`
+    of the keyframes of ``poses`` (the final map's, associated as ``final``) where its point is
+    predicted sharply. The fitted point and its lines of sight, or None."""
     eps, sigma = names.model.eps_rad, names.model.sigma_rad
     met = meeting_point(rays, eps)
     if met is None or len(met[1]) < DISCOVER_KEYFRAMES:
         return None
     h = fit(label, met[1], eps, sigma, met[0])
-    if h is None or (lines := h.lines_of_sight(names.distinct_rad)) < DISCOVER_LINES:
+    if h is None:
+        return None
+    lines = h.lines_of_sight(names.distinct_rad)
+    fan = lines == DISCOVER_LINES - 1 and len(h.rays) >= DISCOVER_FAN_KEYFRAMES
+    if lines < DISCOVER_LINES and not fan:
         return None
     if len({r.movement for r in h.rays}) < DISCOVER_MOVEMENTS:
         return None
@@ -653,7 +666,31 @@ def _final_point(
             continue
         if _stays(h, e) and 2 * sum(ray_fits(r, e, sigma) for r in h.rays) > len(h.rays):
             return None  # mostly bearings of a named landmark: that one, left unexplained
+    if fan:
+        seen, predicted = _seen_at_end(h, final, poses, names.model)
+        if seen < DISCOVER_FAN_SEEN_SHARE * predicted:
+            return None
     return h, lines
+
+
+def _seen_at_end(
+    h: Hypothesis,
+    final: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    model: BearingModel,
+) -> tuple[int, int]:
+    """:func:`~pipeline.association.lifecycle.seen_in_gate` at the final map's keyframes from
+    the first movement of ``h``'s rays on, each with every detection of ``h``'s class."""
+    since = min(r.movement for r in h.rays)
+    keys = sorted(k for k in poses if k[0] >= since)
+    by_key: dict[tuple[int, int], list[float]] = {}
+    for d in final:
+        if d.label == h.label:
+            by_key.setdefault((d.movement, d.end), []).append(d.bearing_rad)
+    origins = np.array([poses[k].origin_fl for k in keys], np.float64).reshape(-1, 2)
+    headings = np.array([poses[k].heading_rad for k in keys], np.float64)
+    bearings = [np.array(by_key.get(k, ()), np.float64) for k in keys]
+    return seen_in_gate(h, origins, headings, bearings, model)
 
 
 def _stays(h: Hypothesis, e: LandmarkEstimate | None) -> bool:

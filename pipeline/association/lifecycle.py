@@ -494,34 +494,17 @@ class Lifecycle:
             self.hypotheses[label] = [o for o in self.hypotheses[label] if not o.keys & h.keys]
 
     def _predicted_seen(self, h: Hypothesis, since: int) -> tuple[int, int]:
-        """At the placed keyframes from movement ``since`` on where the bearing of ``h``'s
-        point is sharp enough to gate: how many held a detection of its class (named or not)
-        in the gate, and how many there were."""
+        """:func:`seen_in_gate` at the placed keyframes from movement ``since`` on, each
+        keyframe's detections of ``h``'s class named or not."""
         keys = [(k, end) for (k, end) in self._seen_at if k >= since and k in self._trajectory]
-        if not keys:
-            return 0, 0
         poses = [self._trajectory[k] for k, _ in keys]
         origins = np.array(
             [p.o1_fl if e == 0 else p.o2_fl for p, (_, e) in zip(poses, keys, strict=True)]
-        )
-        n = len(keys)
-        pred, std = self.model.predict(
-            np.broadcast_to(h.point_fl, (n, 2)),
-            np.broadcast_to(h.cov_fl, (n, 2, 2)),
-            origins,
-            np.array([p.heading_rad for p in poses]),
-            0.0,
-        )
-        seen = predicted = 0
-        away = self.model.outside(pred, std)
-        vague = self.model.vague(std)
-        for i, key in enumerate(keys):
-            if vague[i] or away[i]:
-                continue
-            predicted += 1
-            det = self._seen_at[key].get(h.label, np.zeros(0))
-            seen += bool(np.any((wrap_rad(det - pred[i]) / std[i]) ** 2 <= GATE_CHI2))
-        return seen, predicted
+        ).reshape(-1, 2)
+        headings = np.array([p.heading_rad for p in poses])
+        empty = np.zeros(0)
+        bearings = [self._seen_at[key].get(h.label, empty) for key in keys]
+        return seen_in_gate(h, origins, headings, bearings, self.model)
 
     def _replace(self, trajectory: Mapping[int, MovementPose]) -> None:
         """Place the rays of hypotheses and unmapped named landmarks on ``trajectory``."""
@@ -561,6 +544,48 @@ class Lifecycle:
         if not any(ray_fits(h.rays[-1], e, sigma) for e in named):
             return False  # the last ray alone rules most of them out
         return any(all(ray_fits(r, e, sigma) for r in h.rays) for e in named)
+
+
+def seen_in_gate(
+    h: Hypothesis,
+    origins_fl: NDArray[np.float64],
+    headings_rad: NDArray[np.float64],
+    bearings_rad: list[NDArray[np.float64]],
+    model: BearingModel,
+) -> tuple[int, int]:
+    """At how many keyframes ``h``'s point is predicted sharply enough to gate and in view,
+    and at how many of those a detection of its class lay in the gate: (seen, predicted).
+
+    Parameters
+    ----------
+    h : Hypothesis
+        The point (FL) and its covariance.
+    origins_fl : (n, 2) float
+        The keyframes' positions, FL.
+    headings_rad : (n,) float
+        Their headings, rad, FL.
+    bearings_rad : list of n (k_i,) float arrays
+        Each keyframe's detections of ``h``'s class, rad, robot frame.
+    model : BearingModel
+        The prediction's noise and the camera's view.
+    """
+    n = len(bearings_rad)
+    if n == 0:
+        return 0, 0
+    pred, std = model.predict(
+        np.broadcast_to(h.point_fl, (n, 2)),
+        np.broadcast_to(h.cov_fl, (n, 2, 2)),
+        origins_fl,
+        headings_rad,
+        0.0,
+    )
+    usable = ~model.vague(std) & ~model.outside(pred, std)
+    seen = sum(
+        bool(np.any((wrap_rad(det - pred[i]) / std[i]) ** 2 <= GATE_CHI2))
+        for i, det in enumerate(bearings_rad)
+        if usable[i]
+    )
+    return seen, int(usable.sum())
 
 
 def _close_to(

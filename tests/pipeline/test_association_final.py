@@ -498,3 +498,48 @@ def test_a_name_given_few_of_its_predicted_detections_is_weak() -> None:
     assert weak_names(given(6), poses, {"blue#1": e}, ["blue#1", "blue#2"], **kw) == {}
     weak = weak_names(given(5), poses, {"blue#1": e}, ["blue#1", "blue#2"], **kw)
     assert list(weak) == ["blue#1"] and weak["blue#1"].startswith("given a detection at 5 of 8")
+
+
+def _fan_origins(point: np.ndarray, angles_deg: list[float], per_line: int) -> np.ndarray:
+    """Keyframes on lines of sight through ``point`` at ``angles_deg`` (a 1-degree spread
+    about each), ``per_line`` of them per line, 1-2 m from it."""
+    out = []
+    for a in angles_deg:
+        for j in range(per_line):
+            ang = math.radians(a + (j % 3 - 1) * 0.5)
+            r = 1.0 + j / per_line
+            out.append(point + r * np.array([math.cos(ang), math.sin(ang)]))
+    return np.array(out)
+
+
+def test_a_landmark_seen_from_a_narrow_fan_is_named_once_the_log_is_processed() -> None:
+    rng = np.random.default_rng(11)
+    # a landmark at the arena's edge: every keyframe sees it along one of three lines of sight
+    # 10 degrees apart (the search wants four distinct ones, 2 eps = 6 degrees apart)
+    edge = np.array([0.9, 2.0])
+    origins = _fan_origins(edge, [-100.0, -90.0, -80.0], 5)
+    assoc, mapped = _one_named(2)
+    final, poses = _unexplained_from(edge, origins, rng)
+    out = assoc.repair_final(final, poses, mapped, 7)
+    assert out is not None and out.confirmed == ["blue#2"]
+    assert "along 3 lines of sight" in out.named_at_end["blue#2"]
+    h = assoc.unmapped["blue#2"]  # seen from a fan: within its own 3 std, long along the fan
+    assert (h.point_fl - edge) @ np.linalg.solve(h.cov_fl, h.point_fl - edge) < 13.82
+    # two lines of sight: any point along them fits, not named
+    assoc, mapped = _one_named(2)
+    final, poses = _unexplained_from(edge, _fan_origins(edge, [-95.0, -80.0], 8), rng)
+    assert assoc.repair_final(final, poses, mapped, 7) is None
+    # three lines but fewer keyframes than a fan needs (11 < 12)
+    assoc, mapped = _one_named(2)
+    final, poses = _unexplained_from(edge, origins[:11], rng)
+    assert assoc.repair_final(final, poses, mapped, 7) is None
+    # the 15 keyframes again, and 4 more on the same fan that see no blob of the class where
+    # the point is predicted: detected at 15 of 19 (79 % < 90 %), not named
+    assoc, mapped = _one_named(2)
+    final, poses = _unexplained_from(edge, origins, rng)
+    for k, origin in enumerate(_fan_origins(edge, [-90.0], 4)):
+        heading = float(rng.uniform(-math.pi, math.pi))
+        poses[(100 + k // 2, k % 2)] = KeyframePose(origin, heading, np.diag([1e-6] * 3))
+        away = heading + math.atan2(*(origin - edge)[::-1]) + 0.5  # a blob far off the gate
+        final.append(FinalDetection(100 + k // 2, k % 2, "blue", away, None, "unexplained"))
+    assert assoc.repair_final(final, poses, mapped, 7) is None
