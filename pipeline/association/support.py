@@ -14,9 +14,9 @@ predictions, never seen, or missed (no detection of its class in its gate) too o
 found by the search among unnamed detections (from rays the hypotheses kept disputing) is
 weaker evidence: seen at half its predictions or fewer and contested at 35 % of them or
 more, it is doubtful too. A name whose bearings scatter too widely is doubtful. How the
-thresholds were chosen is in docs/method.md. A name seen at too few keyframes
-since its naming for either to show is unconfirmed (:meth:`Support.unconfirmed`): reported, as
-the name has not yet been put to the test.
+thresholds were chosen is in docs/RESULTS.md ("Landmarks that look alike: association"). A
+name seen at too few keyframes since its naming for either to show is unconfirmed
+(:meth:`Support.unconfirmed`): reported, as the name has not yet been put to the test.
 """
 
 from __future__ import annotations
