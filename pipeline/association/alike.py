@@ -32,7 +32,7 @@ Poses = dict[tuple[int, int], KeyframePose]
 #: and given, names under suspicion given anew) and associated again at most this many times:
 #: a name given frees the detections it explains, and those left may then point at another
 #: landmark.
-REPAIR_ROUNDS = 3
+REPAIR_ROUNDS = 5
 #: Once the log is processed, each name's bearings in the map are replaced by the detections the
 #: final association gives it, the map is solved again and repaired, in rounds until neither
 #: changes anything, at most this many rounds (association and estimation in turn).
