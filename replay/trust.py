@@ -79,8 +79,8 @@ def trust_reasons(doc: dict[str, Any]) -> list[str]:
     weak = sorted(n for c in assoc.get("final_map", {}).values() for n in c.get("weak", {}))
     if weak:
         reasons.append(
-            f"weak name(s) {', '.join(weak)} (with the final map, too few detections or "
-            "detections that do not meet at one point)"
+            f"weak name(s) {', '.join(weak)} (with the final map, too few detections, "
+            "detections that do not meet at one point, or a missing landmark in line with it)"
         )
     unfit = _unfit(doc)
     ref = {doc.get("frame", {}).get(k) for k in ("origin", "x_axis")}

@@ -5,6 +5,7 @@ predicted bearing's std, landmarks a few degrees apart told apart once the keyfr
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -543,3 +544,53 @@ def test_a_landmark_seen_from_a_narrow_fan_is_named_once_the_log_is_processed() 
         away = heading + math.atan2(*(origin - edge)[::-1]) + 0.5  # a blob far off the gate
         final.append(FinalDetection(100 + k // 2, k % 2, "blue", away, None, "unexplained"))
     assert assoc.repair_final(final, poses, mapped, 7) is None
+
+
+def _seen_from_afar(
+    name_fl: np.ndarray, missing_fl: np.ndarray, rng: np.random.Generator
+) -> tuple[list[FinalDetection], dict[tuple[int, int], KeyframePose]]:
+    """12 keyframes 2.5-3.5 FL below the name on a 3 FL wide front, heading 0: at each, the
+    name's blob (named, 0.3 degrees of noise) and the missing landmark's (unexplained)."""
+    final, poses = [], {}
+    for k in range(12):
+        origin = np.array([-1.5 + 3.0 * k / 11, -2.5 - (k % 3) * 0.5])
+        key = (k // 2, k % 2)
+        poses[key] = KeyframePose(origin, 0.0, 1e-6 * np.eye(3))
+        for point, name, status in (
+            (name_fl, "blue#1", Status.NAMED),
+            (missing_fl, None, Status.UNEXPLAINED),
+        ):
+            d = point - origin
+            b = math.atan2(d[1], d[0]) + rng.normal(0.0, 0.3 * DEG)
+            final.append(FinalDetection(key[0], key[1], "blue", b, name, status))
+    return final, poses
+
+
+def test_a_name_a_missing_landmark_lines_up_with_from_most_keyframes_is_weak() -> None:
+    rng = np.random.default_rng(5)
+    name_fl = np.array([0.0, 1.0])
+    e = LandmarkEstimate(name_fl.copy(), 1e-5 * np.eye(2))
+    kw = {"noise_rad": DEG, "eps_rad": 3 * DEG}
+    # a landmark the map lacks 0.12 FL beside the name: 1.5-2.2 degrees apart from every
+    # keyframe, within the name's gate (3.3 std of about 1 degree): weak, and said why
+    missing = name_fl + np.array([0.12, 0.0])
+    final, poses = _seen_from_afar(name_fl, missing, rng)
+    # the oracle, by hand: the bearing between the two from each keyframe
+    apart = [
+        abs(math.atan2(*(missing - p.origin_fl)[::-1]) - math.atan2(*(name_fl - p.origin_fl)[::-1]))
+        for p in poses.values()
+    ]
+    assert max(apart) < math.sqrt(10.83) * DEG
+    weak = weak_names(final, poses, {"blue#1": e}, ["blue#1"], **kw)
+    assert list(weak) == ["blue#1"]
+    where = re.match(r"the landmark missing near \(([-\d.]+), ([-\d.]+)\) FL", weak["blue#1"])
+    assert where is not None
+    assert math.dist((float(where[1]), float(where[2])), missing) < 0.05
+    assert "in its gate at 12 of 12 keyframes" in weak["blue#1"]
+    # 0.6 FL beside it, 8-13 degrees apart: told apart from every keyframe, not weak
+    final, poses = _seen_from_afar(name_fl, name_fl + np.array([0.6, 0.0]), rng)
+    assert weak_names(final, poses, {"blue#1": e}, ["blue#1"], **kw) == {}
+    # the missing landmark's blobs at only two keyframes: no point to line up with
+    final, poses = _seen_from_afar(name_fl, missing, rng)
+    kept = [d for d in final if d.status == Status.NAMED or d.movement == 0]
+    assert weak_names(kept, poses, {"blue#1": e}, ["blue#1"], **kw) == {}

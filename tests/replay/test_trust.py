@@ -137,8 +137,8 @@ def test_weak_and_loosely_placed_names_are_flagged_by_name() -> None:
         },
     }
     assert trust_reasons(doc) == [
-        "weak name(s) blue#3 (with the final map, too few detections or detections that do "
-        "not meet at one point)",
+        "weak name(s) blue#3 (with the final map, too few detections, detections that do not "
+        "meet at one point, or a missing landmark in line with it)",
         "name(s) blue#10 placed only to within 10 cm or worse (their regions at 99 % for the "
         "run's names together)",
     ]
@@ -147,8 +147,8 @@ def test_weak_and_loosely_placed_names_are_flagged_by_name() -> None:
     # without the map's unit, no distance can be judged
     del doc["map_unit_m"]
     assert trust_reasons(doc) == [
-        "weak name(s) blue#3 (with the final map, too few detections or detections that do "
-        "not meet at one point)"
+        "weak name(s) blue#3 (with the final map, too few detections, detections that do not "
+        "meet at one point, or a missing landmark in line with it)"
     ]
 
 
