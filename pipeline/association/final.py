@@ -350,11 +350,26 @@ def given_share(
     eps_rad: float,
 ) -> tuple[int, int]:
     """At how many keyframes of ``poses`` the final map predicts ``name`` (its ``estimate``,
+    FL) sharply enough to gate (:func:`sharp_predictions`), and how many of ``detections``
+    were given ``name``: (given, predicted)."""
+    predicted = len(sharp_predictions(estimate, poses, noise_rad=noise_rad, eps_rad=eps_rad))
+    return sum(d.name == name for d in detections), predicted
+
+
+def sharp_predictions(
+    estimate: LandmarkEstimate,
+    poses: Mapping[tuple[int, int], KeyframePose],
+    *,
+    noise_rad: float,
+    eps_rad: float,
+) -> list[tuple[KeyframePose, float, float]]:
+    """The keyframes of ``poses`` where the final map predicts a landmark (its ``estimate``,
     FL) sharply enough to gate (std at most :data:`MAX_PRED_STD_EPS` eps, bearing noise
-    ``noise_rad``), and how many of ``detections`` were given ``name``: (given, predicted)."""
-    predicted = 0
+    ``noise_rad``, the pose's covariance): each with the predicted bearing and its std (rad,
+    robot frame)."""
+    out = []
     for p in poses.values():
-        _, std = predict_bearings(
+        pred, std = predict_bearings(
             p.origin_fl,
             p.heading_rad,
             estimate.mean_fl[None, :],
@@ -362,8 +377,9 @@ def given_share(
             bearing_var_rad=noise_rad**2,
             pose_cov=p.cov,
         )
-        predicted += bool(std[0] <= MAX_PRED_STD_EPS * eps_rad)
-    return sum(d.name == name for d in detections), predicted
+        if std[0] <= MAX_PRED_STD_EPS * eps_rad:
+            out.append((p, float(pred[0]), float(std[0])))
+    return out
 
 
 def weak_names(
@@ -425,26 +441,16 @@ def lined_up(
     eps_rad: float,
 ) -> tuple[int, int]:
     """At how many keyframes of ``poses`` the final map predicts a landmark (its
-    ``estimate``, FL) sharply enough to gate (as :func:`given_share`), and at how many of those
+    ``estimate``, FL) sharply enough to gate (:func:`sharp_predictions`), and at how many of those
     the bearing of ``point_fl`` (FL, (2,)) lies in its gate (chi-square 1 dof, 99.9 %):
     (lined up, predicted)."""
-    lined = predicted = 0
-    for p in poses.values():
-        pred, std = predict_bearings(
-            p.origin_fl,
-            p.heading_rad,
-            estimate.mean_fl[None, :],
-            estimate.cov_fl[None, :, :],
-            bearing_var_rad=noise_rad**2,
-            pose_cov=p.cov,
-        )
-        if std[0] > MAX_PRED_STD_EPS * eps_rad:
-            continue
-        predicted += 1
+    sharp = sharp_predictions(estimate, poses, noise_rad=noise_rad, eps_rad=eps_rad)
+    lined = 0
+    for p, pred, std in sharp:
         d = point_fl - p.origin_fl
-        off = float(wrap_rad(math.atan2(d[1], d[0]) - p.heading_rad - pred[0]))
-        lined += off**2 <= GATE_CHI2 * std[0] ** 2
-    return lined, predicted
+        off = float(wrap_rad(math.atan2(d[1], d[0]) - p.heading_rad - pred))
+        lined += off**2 <= GATE_CHI2 * std**2
+    return lined, len(sharp)
 
 
 def _misfit(
