@@ -491,6 +491,23 @@ def test_a_map_broken_by_names_of_mixed_rays_is_mended_once_the_log_is_processed
 
 
 @pytest.mark.slow  # one simulated 30-movement run of 12 landmarks, 5-10 s
+def test_a_name_a_missing_landmark_lines_up_with_is_flagged(tmp_path: Path) -> None:
+    # 12 identical landmarks in 4 x 3 m, omni, seed 21: B8 is never named, and the name on B1,
+    # 37 cm from it, took some of its detections: it stands more than 10 cm off (the truth
+    # measured directly) with a region of about 2.5 cm, which no other test flagged (main
+    # before). From most keyframes the point where B8's unexplained detections meet lies in
+    # that name's gate: it is weak, and says so
+    s = _arena_scored(12, (4.0, 3.0), 21, tmp_path)
+    blue = s.summary["association"]["final_map"]["blue"]
+    assert "warning" in blue
+    (pulled,) = [n for n, t in s.matched.items() if t == "B1"]
+    assert s.errors_m[pulled] > 0.10, s.errors_m  # the scenario: else the test tests nothing
+    assert blue["weak"][pulled].startswith("the landmark missing near"), blue["weak"]
+    flagged = set(blue["weak"]) | set(s.summary["association"].get("doubtful", {}))
+    assert {n for n, e in s.errors_m.items() if e > 0.10} <= flagged
+
+
+@pytest.mark.slow  # one simulated 30-movement run of 12 landmarks, 5-10 s
 def test_a_landmark_at_the_arena_edge_is_named_once_the_log_is_processed(tmp_path: Path) -> None:
     # 12 identical landmarks in 4 x 3 m, omni, seed 23: B11 stands 22 cm from the arena's edge
     # and the robot sees it only along 3 lines of sight; the search during the run, with its
