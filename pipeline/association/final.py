@@ -20,6 +20,9 @@ of it given or not), and where their rays meet (:func:`meeting_point`).
 :func:`repair_final` then gives a free name, or the one the final map supports least, to the
 point where those detections meet as the search names a landmark, or gives names under
 suspicion anew where their detections and the unexplained ones meet (:func:`_rebuild`).
+:func:`weak_names` flags by name what the final map supports weakly: names given few of their
+predicted detections, whose detections do not meet at one point, or that a missing landmark's
+point lines up with from most keyframes (:func:`lined_up`).
 """
 
 from __future__ import annotations
@@ -335,7 +338,7 @@ WEAK_SHARE = 0.75
 #: sharply is weak: the two cannot be told apart from most keyframes, so its detections may be
 #: the missing landmark's and its point pulled between them. Measured on 180 simulated runs of
 #: 8, 12 and 16 identical landmarks: the two names more than 10 cm off that nothing else
-#: flagged line up with their missing landmark's point at 86 and 93 %; at half, 8 names within
+#: flagged line up with their missing landmark's point at 86 and 93 %; at half, 7 names within
 #: 10 cm are flagged besides them.
 LINED_UP_SHARE = 0.5
 
