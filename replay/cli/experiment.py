@@ -283,6 +283,83 @@ def arenas(**kw: Any) -> None:
     click.echo(f"{len(results.runs) - len(failed)}/{len(results.runs)} runs ok; {out}")
 
 
+def _families(ctx: click.Context, param: click.Parameter, text: str) -> tuple[str, ...]:
+    """``--families``: ``all``, or a comma-separated, non-empty subset of the family names."""
+    from replay.experiments.families import FAMILIES
+
+    if text.strip() == "all":
+        return FAMILIES
+    families = tuple(dict.fromkeys(f.strip() for f in text.split(",") if f.strip()))
+    unknown = [f for f in families if f not in FAMILIES]
+    if unknown or not families:
+        raise click.BadParameter(
+            f"expected all or a comma-separated list of {', '.join(FAMILIES)}, got {text!r}"
+        )
+    return families
+
+
+@experiment.command("calibration")
+@click.option(
+    "--out",
+    type=click.Path(path_type=Path),
+    required=True,
+    help="Folder for scores.jsonl, calibration.json and calibration.md.",
+)
+@click.option(
+    "--families",
+    default="all",
+    show_default=True,
+    callback=_families,
+    help="Arena families (replay/experiments/families.py), comma-separated, or all.",
+)
+@click.option(
+    "--runs", type=click.IntRange(min=1), default=40, show_default=True, help="Runs per family."
+)
+@click.option(
+    "--seed", type=SEED, default=0, show_default=True, help="Run i of each family uses SEED + i."
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    default=DEFAULT_WORKERS,
+    show_default=True,
+    help="Local worker processes.",
+)
+@click.option("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786) instead.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--force", is_flag=True, help="Replace earlier results in --out.")
+def calibration(**kw: Any) -> None:
+    """Do the joint map's 80% regions hold the truth 80% of the time? Simulated logs of each
+    arena family through bearing extraction, the joint estimator and batch least squares:
+    coverage with a 90% bootstrap interval over runs, and the mean error against least squares."""
+    from replay.experiments.calibration_experiment import calibration_experiment, table_markdown
+
+    out = _out_dir(kw["out"], kw["force"])
+    results = calibration_experiment(
+        out,
+        kw["families"],
+        kw["runs"],
+        kw["seed"],
+        workers=kw["workers"],
+        scheduler=kw["scheduler"],
+        progress=not kw["quiet"],
+        command=_command(),
+    )
+    for family, seed, why in results.failures:
+        click.echo(f"{family} seed {seed}: {why}", err=True)
+    total = len(kw["families"]) * kw["runs"]
+    if len(results.failures) == total:
+        family, seed, why = results.failures[0]
+        raise NoRunSucceededError(
+            f"no run succeeded: all {total} failed, e.g. {family} seed {seed}: {why}"
+        )
+    click.echo(table_markdown(results.families), nl=False)
+    click.echo(
+        f"{total - len(results.failures)}/{total} runs ok in {results.elapsed_s:.1f} s; "
+        f"table: {out / 'calibration.md'}; every landmark: {out / 'scores.jsonl'}"
+    )
+
+
 def _command() -> str:
     return "bslam " + " ".join(shlex.quote(a) for a in sys.argv[1:])
 

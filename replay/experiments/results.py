@@ -107,7 +107,8 @@ class Results:
         return [r for r in self.runs if r.status != "ok"]
 
 
-def _json_float(x: float) -> float | None:
+def json_float(x: float) -> float | None:
+    """``x``, or None when it is not finite (JSON has no NaN or infinity)."""
     return x if math.isfinite(x) else None
 
 
@@ -117,8 +118,8 @@ def write_results(results: Results, out_dir: Path) -> Path:
     rows = []
     for r in results.rows:
         d = asdict(r)
-        d["error_fl"] = _json_float(r.error_fl)
-        d["error_cm"] = _json_float(r.error_cm)
+        d["error_fl"] = json_float(r.error_fl)
+        d["error_cm"] = json_float(r.error_cm)
         rows.append(d)
     doc = {
         "experiment": results.experiment,
