@@ -4,7 +4,8 @@ A map is not trustworthy when its own evidence says so: a class of look-alike la
 detections that no name explains with the final map (a landmark missing, or a name where rays
 of several landmarks meet), names are doubtful, unconfirmed, weak with the final map, or placed
 only loosely (their region reaching farther than :data:`LOOSE_M`, at 99 % for the run's names
-together: :data:`LOOSE_RUN_RISK`; flagged one by one), or the
+together: :data:`LOOSE_RUN_RISK`; flagged one by one), or a landmark's bearings scatter about
+it far more widely than the map's do (detections of several landmarks under one name), or the
 bearings of several movements do not fit the map (they were skipped as not fitting it, or the
 map diverged with them), or fewer than half of the movements are in the map, or the map has
 collapsed (landmarks where the robot stood). The verdict is a
@@ -19,8 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.association.support import DOUBT_SCATTER, DOUBT_SCATTER_BEARINGS
 from pipeline.estimate import chi2_2dof_quantile
 from pipeline.geometry import widest_std
+from pipeline.joint.noise import robust_std
 from pipeline.joint.robustness import REJECT_EPS
 
 #: This many movements skipped because their bearings did not fit the map make it doubtful.
@@ -97,6 +100,14 @@ def trust_reasons(doc: dict[str, Any]) -> list[str]:
             f"{REJECT_EPS:g} eps from the map (it stands elsewhere, or its detections are "
             "another's)"
         )
+    unfit_names = {name for name, _, _ in unfit}
+    scattered = [f"{n} ({ratio:.1f}x)" for n, ratio in _scattered(doc) if n not in unfit_names]
+    if scattered:
+        reasons.append(
+            f"landmark(s) {', '.join(scattered)} whose bearings scatter about the map that many "
+            "times as widely as the map's bearings do (its detections may be of several "
+            "landmarks)"
+        )
     loose = _loose(doc)
     if loose:
         reasons.append(
@@ -144,6 +155,31 @@ def _unfit(doc: dict[str, Any]) -> list[tuple[str, int, int]]:
         for name, n in seen.items()
         if n >= UNFIT_MIN_BEARINGS and 2 * far[name] > n
     ]
+
+
+def _scattered(doc: dict[str, Any]) -> list[tuple[str, float]]:
+    """Landmarks not of a shared class (a name without ``#``: association judges those) with at
+    least :data:`~pipeline.association.support.DOUBT_SCATTER_BEARINGS` recorded bearings whose
+    residuals scatter more than :data:`~pipeline.association.support.DOUBT_SCATTER` times as
+    widely as the map's bearing noise (robust scale over the noise): (name, ratio), in the order
+    first recorded (none without a noise estimate). Rays of one landmark meet at its point to
+    within the noise; a detector that reads another landmark's blob as this one (a colour pair
+    read as a two-band code) gives it rays that meet at two points."""
+    noise_deg = doc.get("bearing_noise_deg")
+    if not noise_deg:
+        return []
+    residuals: dict[str, list[float]] = {}
+    for m in doc.get("movements", []):
+        for name, ends in (m.get("residuals_deg") or {}).items():
+            residuals.setdefault(name, []).extend(r for r in ends if r is not None)
+    out = []
+    for name, r in residuals.items():
+        if "#" in name or len(r) < DOUBT_SCATTER_BEARINGS:
+            continue
+        ratio = robust_std(np.asarray(r, np.float64)) / float(noise_deg)
+        if ratio > DOUBT_SCATTER:
+            out.append((name, ratio))
+    return out
 
 
 def _collapsed(doc: dict[str, Any]) -> list[str]:

@@ -205,3 +205,34 @@ def test_a_reference_landmark_whose_bearings_miss_the_map_puts_the_frame_in_doub
     doc = _residual_doc({"L2": far})
     del doc["method"]
     assert trust_reasons(doc) == []
+
+
+def test_a_landmark_whose_bearings_scatter_is_named() -> None:
+    # L3: |r| 0.7 and 1.2, robust scale 1.4826 x 0.95 = 1.41 deg; L4: half its bearings near
+    # the map, half 3.7-4.6 deg off (all within 2 eps), robust scale 1.4826 x 3.75 = 5.56 deg
+    l3 = [[0.7, -0.7], [1.2, -1.2]] * 4
+    l4 = [[0.2, -0.3], [4.0, -4.5], [0.1, 3.8], [-4.2, 0.4], [4.4, -0.2], [-3.9, 4.1]]
+    l4 += [[0.3, -4.6], [3.7, -0.1]]
+    doc = _residual_doc({"L3": l3, "L4": l4})
+    assert trust_reasons(doc) == []  # no noise estimate: nothing to compare with
+    doc["bearing_noise_deg"] = 1.0
+    assert trust_reasons(doc) == [
+        "landmark(s) L4 (5.6x) whose bearings scatter about the map that many times as widely "
+        "as the map's bearings do (its detections may be of several landmarks)"
+    ]
+    doc["bearing_noise_deg"] = 0.8  # L3: 1.41 / 0.8 = 1.76 > 1.7
+    assert "L3 (1.8x), L4 (6.9x)" in trust_reasons(doc)[0]
+    # too few bearings to judge (9), and a name of a shared class (association judges it)
+    doc = _residual_doc({"L4": [*l4[:4], [0.2, None]], "red#1": l4})
+    doc["bearing_noise_deg"] = 1.0
+    assert trust_reasons(doc) == []
+
+
+def test_a_landmark_whose_bearings_mostly_miss_is_not_named_twice() -> None:
+    most = [[7.0, 6.5], [-9.0, 0.1], [6.5, -12.0], [-6.1, 8.9], [None, 30.0], [0.2, 0.1]]
+    doc = _residual_doc({"L4": most})
+    doc["bearing_noise_deg"] = 1.0
+    assert trust_reasons(doc) == [
+        "landmark(s) L4 (8 of 11) whose bearings mostly lie more than 2 eps from the map (it "
+        "stands elsewhere, or its detections are another's)"
+    ]
