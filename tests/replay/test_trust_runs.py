@@ -1,7 +1,8 @@
 """The trust verdict on whole simulated runs of an arena family (slow): a map whose frame is
 wrong because its reference landmark's bearings do not fit it is called not trustworthy, the
-same map once the estimator solved it again from its record is trusted, and a map of the same
-family that holds its landmarks is trusted.
+same map once the estimator solved it again from its record is trusted, a map of the same
+family that holds its landmarks is trusted, and a map with a landmark read from two others is
+called not trustworthy by that landmark's scatter.
 
 The oracle is the scenario: the true landmark positions, mapped into the frame of the
 reference pair by hand (origin L1, x axis towards L2, unit |L1 L2|), against the summary's map.
@@ -71,3 +72,17 @@ def test_a_map_that_holds_its_landmarks_is_trusted(tmp_path: Path) -> None:
     scenario, summary = _run("coded", 9020, tmp_path)
     assert max(_errors_m(scenario, summary).values()) < 0.1
     assert summary["trust"] == {"trustworthy": True}
+
+
+def test_a_landmark_read_from_two_others_is_named_by_its_scatter(tmp_path: Path) -> None:
+    # three close pairs, seed 12069: the coded L8 (blue over yellow) is also read where the
+    # single-colour L3 (blue) and L4 (yellow) stand one before the other; the map puts L8 between
+    # its two sources, its region tight about the wrong point, and few of its bearings lie
+    # beyond 2 eps
+    scenario, summary = _run("close_pairs", 12069, tmp_path)
+    errors = _errors_m(scenario, summary)
+    assert errors["L8"] > 0.5
+    assert all(e < 0.1 for n, e in errors.items() if n != "L8")
+    assert summary["trust"]["trustworthy"] is False
+    reasons = summary["trust"]["reasons"]
+    assert len(reasons) == 1 and "landmark(s) L8 (" in reasons[0] and "scatter" in reasons[0]
