@@ -142,19 +142,22 @@ def _unfit(doc: dict[str, Any]) -> list[tuple[str, int, int]]:
     if not eps_deg:
         return []
     bound = REJECT_EPS * float(eps_deg)
-    far: dict[str, int] = {}
-    seen: dict[str, int] = {}
+    out = []
+    for name, r in _recorded_residuals_deg(doc).items():
+        far = sum(abs(x) > bound for x in r)
+        if len(r) >= UNFIT_MIN_BEARINGS and 2 * far > len(r):
+            out.append((name, far, len(r)))
+    return out
+
+
+def _recorded_residuals_deg(doc: dict[str, Any]) -> dict[str, list[float]]:
+    """Every landmark's recorded bearing residuals (``residuals_deg`` of the movements, deg),
+    the landmarks in the order first recorded."""
+    out: dict[str, list[float]] = {}
     for m in doc.get("movements", []):
         for name, ends in (m.get("residuals_deg") or {}).items():
-            for r in ends:
-                if r is not None:
-                    seen[name] = seen.get(name, 0) + 1
-                    far[name] = far.get(name, 0) + (abs(r) > bound)
-    return [
-        (name, far[name], n)
-        for name, n in seen.items()
-        if n >= UNFIT_MIN_BEARINGS and 2 * far[name] > n
-    ]
+            out.setdefault(name, []).extend(r for r in ends if r is not None)
+    return out
 
 
 def _scattered(doc: dict[str, Any]) -> list[tuple[str, float]]:
@@ -168,12 +171,8 @@ def _scattered(doc: dict[str, Any]) -> list[tuple[str, float]]:
     noise_deg = doc.get("bearing_noise_deg")
     if not noise_deg:
         return []
-    residuals: dict[str, list[float]] = {}
-    for m in doc.get("movements", []):
-        for name, ends in (m.get("residuals_deg") or {}).items():
-            residuals.setdefault(name, []).extend(r for r in ends if r is not None)
     out = []
-    for name, r in residuals.items():
+    for name, r in _recorded_residuals_deg(doc).items():
         if "#" in name or len(r) < DOUBT_SCATTER_BEARINGS:
             continue
         ratio = robust_std(np.asarray(r, np.float64)) / float(noise_deg)
