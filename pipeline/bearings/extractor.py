@@ -87,6 +87,11 @@ def _is_grey(image: NDArray[np.uint8]) -> bool:
     return int(blue.max()) - int(blue.min()) > 8
 
 
+#: A code whose band colours' single-colour blobs lie this share of its width or more apart in
+#: bearing is those landmarks side by side, not one coded landmark.
+SIDE_BY_SIDE_SHARE = 0.25
+
+
 class BearingExtractor:
     """Find catalog landmarks and measure their bearings, frame by frame or in batches.
 
@@ -277,6 +282,10 @@ class BearingExtractor:
         if self._decoder is not None:
             labels = _labels(planes, self._label_luts)
             coded = self._decoder.decode(self._decoder.grid(labels))
+            coded = [
+                ([b for b in blobs if not self._side_by_side(b, cls.colors, found)], largest)
+                for cls, (blobs, largest) in zip(self._coded, coded, strict=True)
+            ]
         code_blobs = [b for blobs, _ in coded for b in blobs]
         fringe = {
             "max_width_rad": self._layout.fringe_width_rad,
@@ -340,6 +349,31 @@ class BearingExtractor:
         ]
         kept = [b for b, w in zip(blobs, why, strict=True) if w is None]
         return kept, tuple((b, w) for b, w in zip(blobs, why, strict=True) if w is not None)
+
+    def _side_by_side(
+        self, code: Blob, colors: tuple[str, ...], found: list[tuple[list[Blob], int]]
+    ) -> bool:
+        """True if coded ``code`` (band ``colors``) is single-colour landmarks of its band
+        colours side by side: for every band colour a blob of a single-colour class overlaps
+        it, and the largest of each colour lie more than half the code's width apart in
+        bearing. The bands of one landmark share its bearings; two landmarks one behind the
+        other, seen where their edges meet, read as a stack of their colours only along the
+        rays (omni) or columns where they overlap."""
+        bearings = []
+        for color in dict.fromkeys(colors):
+            near = [
+                b
+                for cls, (blobs, _) in zip(self._singles, found, strict=True)
+                if cls.colors == (color,)
+                for b in blobs
+                if abs(wrap_rad(b.bearing_rad - code.bearing_rad))
+                <= 0.5 * (b.width_rad + code.width_rad)
+            ]
+            if not near:
+                return False
+            bearings.append(max(near, key=lambda b: b.n_pixels).bearing_rad)
+        spread = max(abs(wrap_rad(a - b)) for a in bearings for b in bearings)
+        return spread > SIDE_BY_SIDE_SHARE * code.width_rad
 
     def _within(self, blob: Blob, code: Blob) -> bool:
         """True if single-colour ``blob`` lies inside coded ``code``'s bearings: one of its bands

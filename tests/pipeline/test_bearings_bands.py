@@ -396,3 +396,28 @@ def test_codes_read_over_the_same_bearings_are_both_dropped() -> None:
     assert found["red-green"].blobs == ()
     (only,) = found["red-cyan"].blobs
     assert abs(math.degrees(only.bearing_rad - cal.bearing_of_column(302.0))) < 0.5
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("offset_deg", [1.6, 1.8, 2.2])
+def test_two_landmarks_edge_to_edge_are_not_their_colours_code(
+    model: str, offset_deg: float
+) -> None:
+    # a blue landmark 0.64 m away and a yellow one 0.72 m away, a little to its left: where
+    # their edges meet, rays (omni) cross blue then yellow, the code of L8 (blue over yellow)
+    a = math.radians(150.0)
+    b = a + math.radians(offset_deg)
+    x0, y0 = 1.0, 0.2
+    blue = Landmark("L3", x0 + 0.64 * math.cos(a), y0 + 0.64 * math.sin(a), "blue")
+    yellow = Landmark("L4", x0 + 0.72 * math.cos(b), y0 + 0.72 * math.sin(b), "yellow")
+    code = Landmark("L8", 0.2, 0.9, None, bands=("blue", "yellow"))
+    world, cal = SimWorld(Arena(1.5, 1.5), (blue, yellow, code)), CALIBRATIONS[model]
+    pose = (x0, y0, 0.0)
+    det = BearingExtractor(cal, [_spec(blue), _spec(yellow), _spec(code)]).extract(
+        _render(world, cal, pose, 3).image_bgr
+    )
+    for lm in (blue, yellow, code):
+        truth = math.atan2(lm.y - y0, lm.x - x0)
+        got = det[lm.name].bearing_rad
+        assert got is not None, (lm.name, det)
+        assert abs(_err_deg(got, truth)) < 0.5, (lm.name, math.degrees(got), math.degrees(truth))

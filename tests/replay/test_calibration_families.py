@@ -60,12 +60,10 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
 #: Batch least squares on the same bearings is as far off each time: the bearings point there.
 #: The paper's arena: chi2(2) puts 4e-5 beyond d^2 20, one such among 100 regions is a tail
 #: event or a detection error. No added noise: the extraction's errors are heavier-tailed than
-#: a Gaussian (docs/RESULTS.md: 5 of 296 fresh regions beyond 99.99%). Close pairs: L8 (coded,
-#: 6-10 cm from L7) 1.65 m off, a wrong detection beside its neighbour that the map trusts.
+#: a Gaussian (docs/RESULTS.md: 5 of 296 fresh regions beyond 99.99%).
 CONFIDENTLY_WRONG = {
     "paper": (28, "L4", 20.1, 3.93, 4.01),
     "noise_free": (26, "L3", 36.1, 2.66, 2.67),
-    "close_pairs": (5, "L8", 29072.0, 165.0, 140.0),
 }
 
 

@@ -10,12 +10,14 @@ reference pair by hand (origin L1, x axis towards L2, unit |L1 L2|), against the
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
+from pipeline.bearings import extractor
 from pipeline.joint.estimator import JointSlam
 from replay.experiments.families import family_scenario
 from replay.experiments.run import simulate
@@ -74,11 +76,14 @@ def test_a_map_that_holds_its_landmarks_is_trusted(tmp_path: Path) -> None:
     assert summary["trust"] == {"trustworthy": True}
 
 
-def test_a_landmark_read_from_two_others_is_named_by_its_scatter(tmp_path: Path) -> None:
-    # three close pairs, seed 12069: the coded L8 (blue over yellow) is also read where the
-    # single-colour L3 (blue) and L4 (yellow) stand one before the other; the map puts L8 between
-    # its two sources, its region tight about the wrong point, and few of its bearings lie
-    # beyond 2 eps
+def test_a_landmark_read_from_two_others_is_named_by_its_scatter(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # three close pairs, seed 12069, without the extractor's side-by-side check: the coded L8
+    # (blue over yellow) is also read where the single-colour L3 (blue) and L4 (yellow) meet edge
+    # to edge; the map puts L8 between its two sources, its region tight about the wrong point,
+    # and few of its bearings lie beyond 2 eps
+    monkeypatch.setattr(extractor, "SIDE_BY_SIDE_SHARE", math.inf)
     scenario, summary = _run("close_pairs", 12069, tmp_path)
     errors = _errors_m(scenario, summary)
     assert errors["L8"] > 0.5
@@ -86,3 +91,11 @@ def test_a_landmark_read_from_two_others_is_named_by_its_scatter(tmp_path: Path)
     assert summary["trust"]["trustworthy"] is False
     reasons = summary["trust"]["reasons"]
     assert len(reasons) == 1 and "landmark(s) L8 (" in reasons[0] and "scatter" in reasons[0]
+
+
+def test_two_landmarks_edge_to_edge_are_not_read_as_a_code(tmp_path: Path) -> None:
+    # the same run with the check: L3 and L4 are themselves and L8 is in place
+    scenario, summary = _run("close_pairs", 12069, tmp_path)
+    errors = _errors_m(scenario, summary)
+    assert max(errors.values()) < 0.10, errors  # L8 was 0.8 m off without the check
+    assert summary["trust"] == {"trustworthy": True}
