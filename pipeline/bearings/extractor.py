@@ -87,8 +87,8 @@ def _is_grey(image: NDArray[np.uint8]) -> bool:
     return int(blue.max()) - int(blue.min()) > 8
 
 
-#: A code whose band colours' single-colour blobs lie this share of its width or more apart in
-#: bearing is those landmarks side by side, not one coded landmark.
+#: A code whose band colours' single-colour blobs lie more than this share of its width apart
+#: in bearing is those landmarks side by side, not one coded landmark.
 SIDE_BY_SIDE_SHARE = 0.25
 
 
@@ -355,10 +355,10 @@ class BearingExtractor:
     ) -> bool:
         """True if coded ``code`` (band ``colors``) is single-colour landmarks of its band
         colours side by side: for every band colour a blob of a single-colour class overlaps
-        it, and the largest of each colour lie more than half the code's width apart in
-        bearing. The bands of one landmark share its bearings; two landmarks one behind the
-        other, seen where their edges meet, read as a stack of their colours only along the
-        rays (omni) or columns where they overlap."""
+        it, and the largest of each colour lie more than :data:`SIDE_BY_SIDE_SHARE` of the
+        code's width apart in bearing. The bands of one landmark share its bearings; two
+        landmarks one behind the other, seen where their edges meet, read as a stack of their
+        colours only along the rays (omni) or columns where they overlap."""
         bearings = []
         for color in dict.fromkeys(colors):
             near = [
