@@ -166,8 +166,8 @@ def _scattered(doc: dict[str, Any]) -> list[tuple[str, float]]:
     residuals scatter more than :data:`~pipeline.association.support.DOUBT_SCATTER` times as
     widely as the map's bearing noise (robust scale over the noise): (name, ratio), in the order
     first recorded (none without a noise estimate). Rays of one landmark meet at its point to
-    within the noise; a detector that reads another landmark's blob as this one (a colour pair
-    read as a two-band code) gives it rays that meet at two points."""
+    within the noise; a detector that also reads another landmark's blob as this one gives it
+    rays that meet at two points."""
     noise_deg = doc.get("bearing_noise_deg")
     if not noise_deg:
         return []
