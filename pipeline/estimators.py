@@ -49,6 +49,11 @@ class AssociatingEstimator(Estimator, Protocol):
     def noise(self) -> NoiseEstimate | None:
         """Bearing noise estimated from the map's residuals (None: not yet)."""
 
+    @property
+    def marginals(self) -> dict[str, LandmarkEstimate]:
+        """Per landmark: its point and linearized marginal (FL), what predictions from the
+        keyframes combine with the keyframes' covariances."""
+
     def movement_poses(self) -> dict[int, MovementPose]:
         """Every movement in the map, by index (in order), as it is placed now (FL)."""
 

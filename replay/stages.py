@@ -422,7 +422,7 @@ class Runner:
                     (start.detections, end.detections),
                     obs.turn_rad,
                     obs.distance_m,
-                    self.slam,
+                    associating(self.slam),
                 )
             result = self.slam.process_movement(obs)
             if self.alike is not None and assoc is not None:

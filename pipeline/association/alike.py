@@ -22,7 +22,7 @@ from pipeline.association.final import FinalDetection, Status, weak_names
 from pipeline.association.result import MovementAssociation
 from pipeline.association.tracker import Associator
 from pipeline.bearings import Detection, camera_view_rad
-from pipeline.estimators import AssociatingEstimator, Estimator
+from pipeline.estimators import AssociatingEstimator
 from pipeline.geometry import KeyframePose
 from pipeline.slam import MovementObservation, MovementResult, MovementStatus
 
@@ -81,7 +81,7 @@ class AlikeLandmarks:
         detections: tuple[Mapping[str, Detection], Mapping[str, Detection]],
         turn_rad: float | None,
         distance_m: float | None,
-        estimator: Estimator,
+        estimator: AssociatingEstimator,
     ) -> tuple[MovementObservation, MovementAssociation]:
         """The movement's observation for the estimator, named landmarks included (its commanded
         turn and driven distance as given)."""
@@ -105,7 +105,7 @@ class AlikeLandmarks:
             self.keyframe_unique[index, end] = unique[end]
         self.motion[index] = (turn_rad, distance_m)
         assoc = self.associator.associate(
-            index, (unique[0], unique[1]), (blobs[0], blobs[1]), estimator.estimates
+            index, (unique[0], unique[1]), (blobs[0], blobs[1]), estimator.marginals
         )
         for end, named in enumerate((assoc.bearings_o1_rad, assoc.bearings_o2_rad)):
             for name, b in named.items():
@@ -126,7 +126,7 @@ class AlikeLandmarks:
         trajectory = estimator.movement_poses()
         pose = trajectory.get(result.index) if result.status == MovementStatus.OK else None
         self.associator.hypothesize(
-            assoc, pose, estimator.estimates, trajectory, estimator.bearing_scatter
+            assoc, pose, estimator.marginals, trajectory, estimator.bearing_scatter
         )
         self._give(assoc.retracted, assoc.history, estimator)
 
@@ -162,11 +162,11 @@ class AlikeLandmarks:
             noise = estimator.noise
             sigma = None if noise is None else noise.sigma_rad
             left_out = self.associator.place_left_out(
-                self.keyframe_unique, self.keyframe_blobs, poses, estimator.estimates, sigma
+                self.keyframe_unique, self.keyframe_blobs, poses, estimator.marginals, sigma
             )
             poses.update(left_out)
             found, reports = self.associator.associate_final(
-                self.keyframe_blobs, poses, estimator.estimates, sigma
+                self.keyframe_blobs, poses, estimator.marginals, sigma
             )
             return found, reports, poses, sorted({m for m, _ in left_out})
 
@@ -184,7 +184,7 @@ class AlikeLandmarks:
                 detections, reports, poses, placed = associate()
             repair = None
             if repairs < REPAIR_ROUNDS:
-                repair = self.associator.repair_final(detections, poses, estimator.estimates, last)
+                repair = self.associator.repair_final(detections, poses, estimator.marginals, last)
             if repair is not None:
                 repairs += 1
                 self._give(repair.retracted, repair.history, estimator)
@@ -198,7 +198,7 @@ class AlikeLandmarks:
         weak = weak_names(
             detections,
             poses,
-            estimator.estimates,
+            estimator.marginals,
             [n for names in self.associator.named.values() for n in names],
             noise_rad=self.associator.model.sigma_rad if noise is None else noise.sigma_rad,
             eps_rad=self.associator.model.eps_rad,

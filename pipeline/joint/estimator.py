@@ -45,6 +45,7 @@ from pipeline.fusion import PAPER_N_L, PAPER_N_R
 from pipeline.geometry import KeyframePose, MovementPose
 from pipeline.joint import graph as g
 from pipeline.joint import placement, robustness
+from pipeline.joint.frame_spread import frame_spread_cov
 from pipeline.joint.mapgraph import CAREFUL_MOVEMENTS, MapGraph
 from pipeline.joint.noise import NoiseEstimate, robust_std
 from pipeline.joint.result import JointMovementResult
@@ -171,7 +172,21 @@ class JointSlam:
 
     @property
     def estimates(self) -> dict[str, LandmarkEstimate]:
-        """Current estimate per non-reference landmark in the graph (FL)."""
+        """Current estimate per non-reference landmark in the graph (FL), as the map reports it:
+        the point, and the linearized marginal (:attr:`marginals`) with the frame's turn and
+        scale about the reference pair carried to second order
+        (:func:`~pipeline.joint.frame_spread.frame_spread_cov`)."""
+        return {
+            name: LandmarkEstimate(e.mean_fl, frame_spread_cov(e.mean_fl, e.cov_fl))
+            for name, e in self._state.estimates.items()
+        }
+
+    @property
+    def marginals(self) -> dict[str, LandmarkEstimate]:
+        """Per non-reference landmark in the graph: the point and iSAM2's marginal, scaled by
+        the estimated noise (FL). What association predicts bearings with: a turn of the frame
+        moves the keyframes with the landmarks, so a prediction from a keyframe keeps it to first
+        order, as the keyframes' covariances do."""
         return dict(self._state.estimates)
 
     @property
@@ -384,7 +399,7 @@ class JointSlam:
             marginalize_oldest(self._state, self._map, self.window or 0)
         snap = robustness.snapshot(self._state, self._map)  # the map before the movement
         self._state.waiting[obs.index] = m
-        before = self.estimates
+        before = self.marginals
         placed: list[int] = []
         why = ""
         if not self._state.placed:
