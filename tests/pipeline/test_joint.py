@@ -120,6 +120,42 @@ def test_varied_arenas_goals_over_100_runs() -> None:
     assert 0.75 <= s["coverage"] <= 0.85
 
 
+def test_the_reported_map_widens_far_regions_along_the_direction_from_the_pair() -> None:
+    # a reference pair 10 cm apart and landmarks about 0.9 m away (16 FL): the frame's
+    # direction is uncertain by about 3 deg, and each landmark's error lies on an arc about the
+    # pair; the reported covariance is wider along the direction from the pair (the arc's sag)
+    # than the marginal association predicts with, and the points are the same
+    lms = {
+        "L1": (0.95, 0.7),
+        "L2": (1.05, 0.71),
+        "L3": (0.15, 0.15),
+        "L4": (1.85, 1.35),
+        "L5": (0.2, 1.3),
+        "L6": (1.8, 0.15),
+    }
+    run = simulate_bearings(
+        12,
+        np.random.default_rng(5),
+        eps_rad=EPS,
+        sigma_frac=0.5,
+        landmarks_world=lms,
+        arena_m=(2.0, 1.5),
+        move_m=(0.2, 0.5),
+        clearance_m=0.1,
+    )
+    slam = _joint(run, ("L1", "L2"), 5)
+    reported, marginals = slam.estimates, slam.marginals
+    assert sorted(reported) == sorted(marginals) == ["L3", "L4", "L5", "L6"]
+    for name, m in marginals.items():
+        r = reported[name]
+        assert np.array_equal(r.mean_fl, m.mean_fl)
+        away = (m.mean_fl - (0.5, 0.0)) / np.hypot(*(m.mean_fl - (0.5, 0.0)))
+        across = np.array([-away[1], away[0]])
+        # measured: 2-3% more variance along the direction from the pair, a few percent across
+        assert away @ r.cov_fl @ away > 1.01 * (away @ m.cov_fl @ away), name
+        assert across @ r.cov_fl @ across == pytest.approx(across @ m.cov_fl @ across, rel=0.1)
+
+
 @pytest.mark.slow  # 8 runs, about 3 s (fast: test_one_wrong_bearing_does_not_drag_the_map)
 def test_paper_arena_is_at_least_as_good_as_least_squares() -> None:
     joint, ls = [], []
