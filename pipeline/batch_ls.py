@@ -4,7 +4,7 @@ Unknowns: every non-reference landmark's position in FL, and per movement its st
 ``O1`` (FL), heading and log-length (so ``O2 = O1 + e^l (cos h, sin h)``). Gauge: the reference
 pair is fixed at L1 = (0, 0), L2 = (1, 0). Residuals: wrapped bearing errors
 ``wrap(measured - (atan2(L - O) - h))`` at O1 and O2. Solved with
-``scipy.optimize.least_squares`` (trust-region reflective, 2-point Jacobian).
+``scipy.optimize.least_squares`` (trust-region reflective, the Jacobian by hand).
 
 Initial guess, per movement: triangulate every landmark in FR from its two bearings, send the
 reference pair to FL with the same similarity as :mod:`pipeline.frame_change`; landmarks start at
@@ -27,12 +27,23 @@ from pipeline.geometry import triangulate_fr
 from pipeline.slam import MovementObservation
 
 
-def batch_least_squares(
+def two_view_seeds(
     observations: Sequence[MovementObservation],
     landmarks: Sequence[str],
     reference: tuple[str, str],
-) -> dict[str, NDArray[np.float64]]:
-    """Least-squares positions (2,) FL of the non-reference landmarks seen in usable movements."""
+) -> tuple[
+    list[tuple[MovementObservation, NDArray[np.float64], NDArray[np.float64]]],
+    dict[str, NDArray[np.float64]],
+]:
+    """Batch least squares' starting point: every movement that triangulates the reference
+    pair, with its O1 and O2 in FL (the pair's two-view frame sent to FL), and each
+    non-reference landmark (2,) FL at the median of its triangulations in those movements.
+
+    Raises
+    ------
+    EstimationError
+        No movement sees the reference pair with enough parallax.
+    """
     l1, l2 = reference
     moves: list[tuple[MovementObservation, NDArray[np.float64], NDArray[np.float64]]] = []
     seeds: dict[str, list[NDArray[np.float64]]] = {}
@@ -52,9 +63,21 @@ def batch_least_squares(
             p = triangulate_fr(b1[name], b2[name])
             if p is not None:
                 seeds.setdefault(name, []).append(to_fl(p, s1, s2))
-    free = [n for n in landmarks if n not in reference and n in seeds]
     if not moves:
         raise EstimationError("no movement sees the reference pair with enough parallax")
+    medians = {n: np.median(np.array(seeds[n]), axis=0) for n in landmarks if n in seeds}
+    return moves, medians
+
+
+def batch_least_squares(
+    observations: Sequence[MovementObservation],
+    landmarks: Sequence[str],
+    reference: tuple[str, str],
+) -> dict[str, NDArray[np.float64]]:
+    """Least-squares positions (2,) FL of the non-reference landmarks seen in usable movements."""
+    l1, l2 = reference
+    moves, seeds = two_view_seeds(observations, landmarks, reference)
+    free = [n for n in landmarks if n not in reference and n in seeds]
     col = {n: i for i, n in enumerate(free)}
     fixed = {l1: np.array([0.0, 0.0]), l2: np.array([1.0, 0.0])}
     # observation table: movement k, landmark slot (-1/-2 fixed refs), end (0 = O1, 1 = O2)
@@ -85,11 +108,41 @@ def batch_least_squares(
         out: NDArray[np.float64] = wrap_rad(meas_a - pred)
         return out
 
-    x0 = [np.median(np.array(seeds[n]), axis=0) for n in free]
+    rows = np.arange(len(meas_a))
+    lm_col = np.where(slot_a >= 0, 2 * slot_a, -1)  # fixed references: no column
+    mv_col = 2 * nf + 4 * mk_a
+
+    def jacobian(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """d residuals / d x, by hand: with the ray d = P - O (q = |d|^2), the residual moves by
+        (dy, -dx) / q with P, by (-dy, dx) / q with O1, by 1 + L e (dx cos h + dy sin h) / q
+        with the heading and by -L e (dy cos h - dx sin h) / q with the log length (O = O1 + L
+        e (cos h, sin h), e = 0 at O1 and 1 at O2)."""
+        lm = np.vstack((x[: 2 * nf].reshape(nf, 2), fixed[l2], fixed[l1]))
+        mv = x[2 * nf :].reshape(-1, 4)
+        h = mv[mk_a, 2]
+        le = np.exp(mv[mk_a, 3]) * end_a
+        c, s_ = np.cos(h), np.sin(h)
+        p = lm[slot_a]
+        dx = p[:, 0] - (mv[mk_a, 0] + le * c)
+        dy = p[:, 1] - (mv[mk_a, 1] + le * s_)
+        q = dx * dx + dy * dy
+        jac = np.zeros((len(meas_a), x.size))
+        own = lm_col >= 0
+        jac[rows[own], lm_col[own]] = (dy / q)[own]
+        jac[rows[own], lm_col[own] + 1] = (-dx / q)[own]
+        jac[rows, mv_col] = -dy / q
+        jac[rows, mv_col + 1] = dx / q
+        jac[rows, mv_col + 2] = 1.0 + le * (dx * c + dy * s_) / q
+        jac[rows, mv_col + 3] = -le * (dy * c - dx * s_) / q
+        return jac
+
+    x0 = [seeds[n] for n in free]
     for _, o1, o2 in moves:
         d = o2 - o1
         x0.append(np.array([o1[0], o1[1], math.atan2(d[1], d[0]), math.log(math.hypot(*d))]))
     from scipy.optimize import least_squares  # ~0.5 s to import: only when a fit is made
 
-    sol = least_squares(residuals, np.concatenate(x0) if x0 else np.zeros(0), method="trf")
+    sol = least_squares(
+        residuals, np.concatenate(x0) if x0 else np.zeros(0), jac=jacobian, method="trf"
+    )
     return {n: sol.x[2 * i : 2 * i + 2].copy() for i, n in enumerate(free)}
