@@ -24,17 +24,12 @@ from pipeline.association.support import DOUBT_SCATTER, DOUBT_SCATTER_BEARINGS
 from pipeline.estimate import chi2_2dof_quantile
 from pipeline.geometry import widest_std
 from pipeline.joint.noise import robust_std
-from pipeline.joint.robustness import REJECT_EPS
+from pipeline.joint.robustness import COLLAPSE_FL, REJECT_EPS
 
 #: This many movements skipped because their bearings did not fit the map make it doubtful.
 MISFIT_MOVEMENTS = 2
 #: Statuses of movements skipped because their bearings did not fit the map.
 MISFIT_STATUSES = ("does not fit the map", "the map diverged")
-#: A landmark this close (FL) to a keyframe of the map stands where the robot stood: the map
-#: has collapsed onto a point where bearings are undefined (and its covariances mean nothing).
-#: The robot's body keeps it several centimetres from any landmark, over 1% of any |L1 L2|
-#: of a few metres.
-COLLAPSE_FL = 0.005
 #: A name of a shared class whose region (the map's covariance, at :data:`LOOSE_RUN_RISK` for the
 #: run's names together) reaches farther than this from its point, along its widest axis, is
 #: flagged by name: the map cannot tell it within this distance, and a name that far off is

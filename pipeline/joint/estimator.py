@@ -472,8 +472,9 @@ class JointSlam:
         then outlier rejection and reseating: one from the map as it is, one from values that
         owe nothing to it (:func:`pipeline.joint.placement.record_values`). The one that
         explains the record best (:func:`pipeline.joint.robustness.record_error`) replaces the
-        map if it explains it better than the map does; why the map was stuck, or empty
-        (nothing changed)."""
+        map if it explains it better than the map does and has not collapsed
+        (:func:`pipeline.joint.robustness.collapsed`: a landmark where the robot stood fits any
+        bearing of it); why the map was stuck, or empty (nothing changed)."""
         state = self._state
         n = len(state.placed)
         if state.frozen or n > MEND_MAX_MOVEMENTS or n < MEND_GROWTH * self._mend_tried:
@@ -497,7 +498,7 @@ class JointSlam:
             if robustness.reseat_landmarks(trial, graph, self.paper.noise.r_max):
                 robustness.reject_outliers(trial, graph)
             error = robustness.record_error(trial, graph)
-            if error < best[0]:
+            if error < best[0] and not robustness.collapsed(trial, graph):
                 best = (error, trial, graph)
         if best[1] is state:
             return ""

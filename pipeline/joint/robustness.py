@@ -188,6 +188,30 @@ def unit_misfit(state: MapState, graph: MapGraph) -> float:
     return statistics.median(off)  # a few dozen numbers: faster than numpy's
 
 
+#: A landmark this close (FL) to a keyframe of the map stands where the robot stood: the map
+#: has collapsed onto a point where bearings are undefined (and its covariances mean nothing).
+#: The robot's body keeps it several centimetres from any landmark, over 1% of any |L1 L2|
+#: of a few metres.
+COLLAPSE_FL = 0.005
+
+
+def collapsed(state: MapState, graph: MapGraph) -> bool:
+    """Whether a landmark of the map lies within :data:`COLLAPSE_FL` of one of its keyframes."""
+    values = graph.values
+    points = np.array(
+        [
+            [values.atPose2(g.pose_key(k, end)).x(), values.atPose2(g.pose_key(k, end)).y()]
+            for k in state.placed
+            for end in (0, 1)
+        ]
+    ).reshape(-1, 2)
+    for name in state.in_graph:
+        d = points - graph.point(name)
+        if points.size and float(np.min(np.hypot(d[:, 0], d[:, 1]))) < COLLAPSE_FL:
+            return True
+    return False
+
+
 def record_error(state: MapState, graph: MapGraph) -> float:
     """The graph's error at the map as it is with every bearing of the placed movements in it,
     the rejected ones too (each through the bearing factors' Huber loss): how well the map

@@ -118,3 +118,28 @@ def test_the_record_error_counts_a_rejected_bearing_through_the_huber_loss() -> 
     huber = k * abs(e) - 0.5 * k * k  # beyond k: the linear part
     assert math.isclose(robustness.record_error(state, graph), huber, rel_tol=1e-6)
     assert state.rejected == {b}  # the map's state is left as it was
+
+
+def _landmark_near_a_keyframe(l3_fl: tuple[float, float]) -> tuple[MapState, MapGraph]:
+    """One movement from (0, 0) to (1, 0.5), L1 and L2 at (0, 2) and (1, 2) (values only, no
+    gauge), and L3 at ``l3_fl`` (FL)."""
+    settings = _settings()
+    state = MapState.empty(settings)
+    graph = MapGraph(settings)
+    state.placed[0] = Movement(0, None, [])
+    state.in_graph.add("L3")
+    values = gtsam.Values()
+    values.insert(g.pose_key(0, 0), gtsam.Pose2(0.0, 0.0, 0.0))
+    values.insert(g.pose_key(0, 1), gtsam.Pose2(1.0, 0.5, 0.0))
+    for name, xy in (("L1", (0.0, 2.0)), ("L2", (1.0, 2.0)), ("L3", l3_fl)):
+        values.insert(settings.key(name), np.array(xy))
+    graph.values = values
+    return state, graph
+
+
+def test_a_landmark_where_the_robot_stood_means_the_map_collapsed() -> None:
+    # distances by hand: from (1.003, 0.5) to the keyframe at (1, 0.5) 0.003 < 0.005 FL;
+    # from (1.004, 0.504) 0.0057; from (0.5, 0.25) 0.56 to either end
+    assert robustness.collapsed(*_landmark_near_a_keyframe((1.003, 0.5)))
+    assert not robustness.collapsed(*_landmark_near_a_keyframe((1.004, 0.504)))
+    assert not robustness.collapsed(*_landmark_near_a_keyframe((0.5, 0.25)))
