@@ -37,8 +37,9 @@ def frame_spread_cov(
     covariance is ``cov_fl`` (2, 2) FL^2, with the error taken as Gaussian in (log distance,
     direction) about :data:`PIVOT_FL` rather than in (x, y).
 
-    Equal to ``cov_fl`` to first order; wider across the line of sight from the pair by about
-    the arc's sag for a landmark far from the pair with a wide direction. ``cov_fl`` itself when
+    Equal to ``cov_fl`` to first order. For a landmark far from the pair with a wide direction,
+    wider along the direction from the pair by about the arc's sag, and a little narrower across
+    it (the arc's chord is shorter than the arc). ``cov_fl`` itself when
     the pole is within :data:`PIVOT_CLEARANCE_STD` standard deviations, or ``cov_fl`` is not a
     finite positive definite matrix.
     """
