@@ -27,23 +27,12 @@ from pipeline.geometry import triangulate_fr
 from pipeline.slam import MovementObservation
 
 
-def two_view_seeds(
+def batch_least_squares(
     observations: Sequence[MovementObservation],
     landmarks: Sequence[str],
     reference: tuple[str, str],
-) -> tuple[
-    list[tuple[MovementObservation, NDArray[np.float64], NDArray[np.float64]]],
-    dict[str, NDArray[np.float64]],
-]:
-    """Batch least squares' starting point: every movement that triangulates the reference
-    pair, with its O1 and O2 in FL (the pair's two-view frame sent to FL), and each
-    non-reference landmark (2,) FL at the median of its triangulations in those movements.
-
-    Raises
-    ------
-    EstimationError
-        No movement sees the reference pair with enough parallax.
-    """
+) -> dict[str, NDArray[np.float64]]:
+    """Least-squares positions (2,) FL of the non-reference landmarks seen in usable movements."""
     l1, l2 = reference
     moves: list[tuple[MovementObservation, NDArray[np.float64], NDArray[np.float64]]] = []
     seeds: dict[str, list[NDArray[np.float64]]] = {}
@@ -63,21 +52,9 @@ def two_view_seeds(
             p = triangulate_fr(b1[name], b2[name])
             if p is not None:
                 seeds.setdefault(name, []).append(to_fl(p, s1, s2))
+    free = [n for n in landmarks if n not in reference and n in seeds]
     if not moves:
         raise EstimationError("no movement sees the reference pair with enough parallax")
-    medians = {n: np.median(np.array(seeds[n]), axis=0) for n in landmarks if n in seeds}
-    return moves, medians
-
-
-def batch_least_squares(
-    observations: Sequence[MovementObservation],
-    landmarks: Sequence[str],
-    reference: tuple[str, str],
-) -> dict[str, NDArray[np.float64]]:
-    """Least-squares positions (2,) FL of the non-reference landmarks seen in usable movements."""
-    l1, l2 = reference
-    moves, seeds = two_view_seeds(observations, landmarks, reference)
-    free = [n for n in landmarks if n not in reference and n in seeds]
     col = {n: i for i, n in enumerate(free)}
     fixed = {l1: np.array([0.0, 0.0]), l2: np.array([1.0, 0.0])}
     # observation table: movement k, landmark slot (-1/-2 fixed refs), end (0 = O1, 1 = O2)
@@ -96,47 +73,49 @@ def batch_least_squares(
     meas_a = np.array(meas)
     nf = len(free)
 
-    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    def rays(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+        """Per bearing: the heading h, L e (the observer's offset from O1 along h) and the ray
+        from the observer to the landmark (dx, dy)."""
         lm = np.vstack((x[: 2 * nf].reshape(nf, 2), fixed[l2], fixed[l1]))  # -2 -> l2, -1 -> l1
         mv = x[2 * nf :].reshape(-1, 4)
         h = mv[mk_a, 2]
-        length = np.exp(mv[mk_a, 3]) * end_a
-        ox = mv[mk_a, 0] + length * np.cos(h)
-        oy = mv[mk_a, 1] + length * np.sin(h)
+        le = np.exp(mv[mk_a, 3]) * end_a
         p = lm[slot_a]
-        pred = np.arctan2(p[:, 1] - oy, p[:, 0] - ox) - h
-        out: NDArray[np.float64] = wrap_rad(meas_a - pred)
+        return (
+            h,
+            le,
+            p[:, 0] - (mv[mk_a, 0] + le * np.cos(h)),
+            p[:, 1] - (mv[mk_a, 1] + le * np.sin(h)),
+        )
+
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        h, _, dx, dy = rays(x)
+        out: NDArray[np.float64] = wrap_rad(meas_a - (np.arctan2(dy, dx) - h))
         return out
 
     rows = np.arange(len(meas_a))
     lm_col = np.where(slot_a >= 0, 2 * slot_a, -1)  # fixed references: no column
     mv_col = 2 * nf + 4 * mk_a
+    own = lm_col >= 0
 
     def jacobian(x: NDArray[np.float64]) -> NDArray[np.float64]:
         """d residuals / d x, by hand: with the ray d = P - O (q = |d|^2), the residual moves by
         (dy, -dx) / q with P, by (-dy, dx) / q with O1, by 1 + L e (dx cos h + dy sin h) / q
         with the heading and by -L e (dy cos h - dx sin h) / q with the log length (O = O1 + L
         e (cos h, sin h), e = 0 at O1 and 1 at O2)."""
-        lm = np.vstack((x[: 2 * nf].reshape(nf, 2), fixed[l2], fixed[l1]))
-        mv = x[2 * nf :].reshape(-1, 4)
-        h = mv[mk_a, 2]
-        le = np.exp(mv[mk_a, 3]) * end_a
-        c, s_ = np.cos(h), np.sin(h)
-        p = lm[slot_a]
-        dx = p[:, 0] - (mv[mk_a, 0] + le * c)
-        dy = p[:, 1] - (mv[mk_a, 1] + le * s_)
+        h, le, dx, dy = rays(x)
+        c, s = np.cos(h), np.sin(h)
         q = dx * dx + dy * dy
         jac = np.zeros((len(meas_a), x.size))
-        own = lm_col >= 0
         jac[rows[own], lm_col[own]] = (dy / q)[own]
         jac[rows[own], lm_col[own] + 1] = (-dx / q)[own]
         jac[rows, mv_col] = -dy / q
         jac[rows, mv_col + 1] = dx / q
-        jac[rows, mv_col + 2] = 1.0 + le * (dx * c + dy * s_) / q
-        jac[rows, mv_col + 3] = -le * (dy * c - dx * s_) / q
+        jac[rows, mv_col + 2] = 1.0 + le * (dx * c + dy * s) / q
+        jac[rows, mv_col + 3] = -le * (dy * c - dx * s) / q
         return jac
 
-    x0 = [seeds[n] for n in free]
+    x0 = [np.median(np.array(seeds[n]), axis=0) for n in free]
     for _, o1, o2 in moves:
         d = o2 - o1
         x0.append(np.array([o1[0], o1[1], math.atan2(d[1], d[0]), math.log(math.hypot(*d))]))
