@@ -39,9 +39,9 @@ def frame_spread_cov(
 
     Equal to ``cov_fl`` to first order. For a landmark far from the pair with a wide direction,
     wider along the direction from the pair by about the arc's sag, and a little narrower across
-    it (the arc's chord is shorter than the arc). ``cov_fl`` itself when
-    the pole is within :data:`PIVOT_CLEARANCE_STD` standard deviations, or ``cov_fl`` is not a
-    finite positive definite matrix.
+    it (the arc's chord is shorter than the arc). ``cov_fl`` itself when the pole is within
+    :data:`PIVOT_CLEARANCE_STD` standard deviations, or ``cov_fl`` is not a finite positive
+    definite matrix.
     """
     cov = np.asarray(cov_fl, np.float64)
     z = np.asarray(mean_fl, np.float64) - np.asarray(PIVOT_FL)

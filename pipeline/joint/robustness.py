@@ -197,19 +197,13 @@ COLLAPSE_FL = 0.005
 
 def collapsed(state: MapState, graph: MapGraph) -> bool:
     """Whether a landmark of the map lies within :data:`COLLAPSE_FL` of one of its keyframes."""
-    values = graph.values
-    points = np.array(
-        [
-            [values.atPose2(g.pose_key(k, end)).x(), values.atPose2(g.pose_key(k, end)).y()]
-            for k in state.placed
-            for end in (0, 1)
-        ]
-    ).reshape(-1, 2)
-    for name in state.in_graph:
-        d = points - graph.point(name)
-        if points.size and float(np.min(np.hypot(d[:, 0], d[:, 1]))) < COLLAPSE_FL:
-            return True
-    return False
+    poses = [graph.values.atPose2(g.pose_key(k, end)) for k in state.placed for end in (0, 1)]
+    if not poses or not state.in_graph:
+        return False
+    keyframes = np.array([[p.x(), p.y()] for p in poses])
+    points = np.array([graph.point(name) for name in state.in_graph])
+    gaps = np.hypot(*(points[:, None, :] - keyframes[None, :, :]).transpose(2, 0, 1))
+    return bool(gaps.min() < COLLAPSE_FL)
 
 
 def record_error(state: MapState, graph: MapGraph) -> float:
