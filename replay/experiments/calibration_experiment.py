@@ -7,9 +7,10 @@ estimator and batch least squares. Per family (:func:`family_coverage`): the sha
 whose truth lies in their 80% region, with a bootstrap interval over runs (the regions of one run
 share its keyframes, so a binomial interval over regions would be too narrow), the median squared
 Mahalanobis distance, the regions whose truth lies beyond 99.99%, and the mean error against batch
-least squares'. Written to ``out_dir``: ``scores.jsonl`` (one line per landmark scored),
-``calibration.json`` (the per-family figures, the failed runs, the command) and
-``calibration.md`` (the table).
+least squares', with a bootstrap interval over runs and the median of the runs' own ratios (a
+run or two where one of the two goes far off can decide a ratio of means). Written to
+``out_dir``: ``scores.jsonl`` (one line per landmark scored), ``calibration.json`` (the
+per-family figures, the failed runs, the command) and ``calibration.md`` (the table).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from replay.experiments.calibration import LandmarkScore, score_run
 from replay.experiments.results import json_float
@@ -59,6 +61,10 @@ class FamilyCoverage:
         Mean error of the joint map and of batch least squares over the landmarks both placed.
     ratio_to_ls : float
         ``error_cm / batch_ls_cm`` (NaN when least squares placed none).
+    ratio_interval : (float, float)
+        :data:`INTERVAL_LEVEL` bootstrap interval of ``ratio_to_ls`` over runs.
+    median_run_ratio : float
+        Median over runs of each run's own ``error_cm / batch_ls_cm``.
     """
 
     family: str
@@ -72,6 +78,8 @@ class FamilyCoverage:
     error_cm: float
     batch_ls_cm: float
     ratio_to_ls: float
+    ratio_interval: tuple[float, float]
+    median_run_ratio: float
 
 
 def family_coverage(
@@ -87,29 +95,46 @@ def family_coverage(
     regions_per_run = np.array([len(run) for run in runs], np.float64)
     nan = math.nan
     if d2.size == 0:
-        return FamilyCoverage(family, len(runs), failed, 0, nan, (nan, nan), nan, 0, nan, nan, nan)
+        return FamilyCoverage(
+            family, len(runs), failed, 0, nan, (nan, nan), nan, 0, nan, nan, nan, (nan, nan), nan
+        )
     picks = rng.integers(0, len(runs), size=(BOOTSTRAP_RESAMPLES, len(runs)))
-    regions = regions_per_run[picks].sum(axis=1)
-    shares = inside_per_run[picks].sum(axis=1)[regions > 0] / regions[regions > 0]
     tail = 100.0 * (1.0 - INTERVAL_LEVEL) / 2.0
-    lo, hi = np.percentile(shares, [tail, 100.0 - tail])
-    error = np.array([s.error_cm for run in runs for s in run], np.float64)
-    ls = np.array([s.batch_ls_cm for run in runs for s in run], np.float64)
-    both = np.isfinite(error) & np.isfinite(ls)
-    error_cm = float(error[both].mean()) if both.any() else nan
-    ls_cm = float(ls[both].mean()) if both.any() else nan
+
+    def interval(num: NDArray[np.float64], den: NDArray[np.float64]) -> tuple[float, float]:
+        """Bootstrap interval of sum(num) / sum(den), the runs resampled by ``picks``."""
+        n, d = num[picks].sum(axis=1), den[picks].sum(axis=1)
+        if not (d > 0.0).any():
+            return nan, nan
+        lo, hi = np.percentile(n[d > 0.0] / d[d > 0.0], [tail, 100.0 - tail])
+        return float(lo), float(hi)
+
+    # per run: the joint map's and least squares' summed error over the landmarks both placed
+    error_run, ls_run, n_run = (np.zeros(len(runs)) for _ in range(3))
+    for i, run in enumerate(runs):
+        for s in run:
+            if math.isfinite(s.error_cm) and math.isfinite(s.batch_ls_cm):
+                error_run[i] += s.error_cm
+                ls_run[i] += s.batch_ls_cm
+                n_run[i] += 1
+    placed = n_run > 0
+    error_cm = float(error_run.sum() / n_run.sum()) if placed.any() else nan
+    ls_cm = float(ls_run.sum() / n_run.sum()) if placed.any() else nan
+    own = placed & (ls_run > 0.0)
     return FamilyCoverage(
         family,
         len(runs),
         failed,
         int(d2.size),
         float(inside_per_run.sum() / regions_per_run.sum()),
-        (float(lo), float(hi)),
+        interval(inside_per_run, regions_per_run),
         float(np.median(d2)),
         int((d2 > CHI2_2_9999).sum()),
         error_cm,
         ls_cm,
         error_cm / ls_cm if ls_cm > 0.0 else nan,
+        interval(error_run, ls_run),
+        float(np.median(error_run[own] / ls_run[own])) if own.any() else nan,
     )
 
 
@@ -117,19 +142,26 @@ def table_markdown(rows: Sequence[FamilyCoverage]) -> str:
     """The per-family figures as a markdown table."""
     lines = [
         "| family | runs | regions | inside the 80% region | 90% interval | median d^2 "
-        "(chi2(2): 1.39) | beyond 99.99% | joint / batch LS (mean error) |",
-        "|---|---|---|---|---|---|---|---|",
+        "(chi2(2): 1.39) | beyond 99.99% | joint / batch LS (mean error) | 90% interval | "
+        "median run's ratio |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
+
+    def num(x: float) -> str:
+        return f"{x:.2f}" if math.isfinite(x) else "-"
+
     for r in rows:
         failed = f" ({r.failed} failed)" if r.failed else ""
         if r.regions == 0:
-            lines.append(f"| {r.family} | {r.runs}{failed} | 0 | - | - | - | - | - |")
+            lines.append(f"| {r.family} | {r.runs}{failed} | 0 | - | - | - | - | - | - | - |")
             continue
-        ratio = f"{r.ratio_to_ls:.2f}" if math.isfinite(r.ratio_to_ls) else "-"
+        lo, hi = r.ratio_interval
         lines.append(
             f"| {r.family} | {r.runs}{failed} | {r.regions} | {100 * r.inside:.1f}% | "
             f"{100 * r.interval[0]:.1f}-{100 * r.interval[1]:.1f}% | {r.median_d2:.2f} | "
-            f"{r.beyond_9999} | {ratio} |"
+            f"{r.beyond_9999} | {num(r.ratio_to_ls)} | "
+            f"{num(lo) + '-' + num(hi) if math.isfinite(lo) else '-'} | "
+            f"{num(r.median_run_ratio)} |"
         )
     return "\n".join(lines) + "\n"
 

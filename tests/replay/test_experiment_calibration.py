@@ -45,6 +45,24 @@ def test_figures_of_a_hand_made_family() -> None:
     lo, hi = r.interval
     assert 1.0 / 3.0 <= lo <= r.inside <= hi <= 1.0
     assert "| f | 3 (2 failed) | 6 | 50.0% |" in ce.table_markdown([r])
+    # the runs' own ratios: 3 / 4 and 3 / 3 (the second run has none); a resample's ratio of
+    # sums lies between its runs' smallest and largest ratio
+    assert r.median_run_ratio == pytest.approx((0.75 + 1.0) / 2)
+    lo, hi = r.ratio_interval
+    assert 0.75 <= lo <= r.ratio_to_ls <= hi <= 1.0
+    assert "| 0.86 | 0.75-1.00 | 0.88 |" in ce.table_markdown([r])
+
+
+def test_one_run_far_off_decides_the_ratio_of_means_not_its_median() -> None:
+    # 39 runs at half least squares' error, one 50x least squares': the ratio of means is
+    # (39 + 100) / 80; a resample leaves that run out with probability (39 / 40)^40 = 36%, so
+    # the interval's low end is the other runs' 0.5
+    runs = [_run([1.0], [1.0], [2.0], seed=i) for i in range(39)] + [_run([1.0], [100.0], [2.0])]
+    r = ce.family_coverage("f", runs, np.random.default_rng(2))
+    assert r.ratio_to_ls == pytest.approx(139.0 / 80.0)
+    assert r.median_run_ratio == pytest.approx(0.5)
+    lo, hi = r.ratio_interval
+    assert lo == pytest.approx(0.5) and hi > 2.0 * r.ratio_to_ls
 
 
 def test_interval_matches_the_binomial_for_independent_regions() -> None:
@@ -73,6 +91,7 @@ def test_interval_is_over_runs_when_a_run_s_regions_go_together() -> None:
 def test_a_family_without_scores_reads_as_such() -> None:
     r = ce.family_coverage("f", [], np.random.default_rng(0), failed=4)
     assert r.regions == 0 and math.isnan(r.inside) and r.failed == 4
+    assert math.isnan(r.median_run_ratio) and all(map(math.isnan, r.ratio_interval))
     assert "| f | 0 (4 failed) | 0 | - |" in ce.table_markdown([r])
 
 
