@@ -70,9 +70,14 @@ class AssociatingEstimator(Estimator, Protocol):
     def settle(self) -> list[str]:
         """Enter the landmarks whose bearings wait and update the map; their names."""
 
-    def rebear(self, bearings: Mapping[str, Sequence[tuple[int, int, float]]]) -> None:
+    def rebear(
+        self,
+        bearings: Mapping[str, Sequence[tuple[int, int, float]]],
+        moved: Mapping[int, MovementPose] | None = None,
+    ) -> None:
         """Give landmarks in the map exactly ``bearings`` (name -> ``(movement, end,
-        bearing_rad)``) in place of theirs and solve the map again."""
+        bearing_rad)``) in place of theirs and solve the map again, the ``moved`` movements
+        (index -> pose, FL) starting from those poses."""
 
 
 def associating(estimator: Estimator) -> AssociatingEstimator:

@@ -306,8 +306,9 @@ class AssociationRecord:
         The map once the log is processed (association and map made to agree, names retracted
         or given then); None: the last movement's map stands.
     placed_by_matching : list of int
-        Movements the map left out, placed for this association by matching their detections
-        with the final map (:func:`pipeline.association.match.place_left_out`).
+        Movements the map left out or held misplaced, placed for this association by matching
+        their detections with the final map (:func:`pipeline.association.match.place_left_out`,
+        :func:`pipeline.association.match.misplaced`).
     named_at_end : dict name -> str
         Free names given once the log was processed to landmarks the final map's unexplained
         detections point at, with why (``estimates`` is then the map with them).
@@ -348,7 +349,7 @@ class AssociationRecord:
         text = "with the final map, " + ("; ".join(parts) or "no detections to associate")
         if self.placed_by_matching:
             moves = ", ".join(str(m) for m in self.placed_by_matching)
-            text += f" (movement(s) {moves}, left out of the map, placed by matching)"
+            text += f" (movement(s) {moves}, left out of the map or misplaced, placed by matching)"
         return text
 
 

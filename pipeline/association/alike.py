@@ -23,11 +23,13 @@ from pipeline.association.result import MovementAssociation
 from pipeline.association.tracker import Associator
 from pipeline.bearings import Detection, camera_view_rad
 from pipeline.estimators import AssociatingEstimator
-from pipeline.geometry import KeyframePose
+from pipeline.geometry import KeyframePose, MovementPose
 from pipeline.slam import MovementObservation, MovementResult, MovementStatus
 
 #: Keyframe poses of the final map, (movement, end) -> pose.
 Poses = dict[tuple[int, int], KeyframePose]
+#: Movements the map holds misplaced, as placed again by matching: movement -> pose (FL).
+Moved = dict[int, MovementPose]
 #: Once the log is processed, the map is repaired (a free name given, a doubtful one retracted
 #: and given, names under suspicion given anew) and associated again at most this many times:
 #: a name given frees the detections it explains, and those left may then point at another
@@ -157,31 +159,42 @@ class AlikeLandmarks:
         until neither changes anything (at most :data:`RESOLVE_ROUNDS` rounds,
         :data:`REPAIR_ROUNDS` repairs)."""
 
-        def associate() -> tuple[list[FinalDetection], dict[str, str], Poses, list[int]]:
+        def associate() -> tuple[list[FinalDetection], dict[str, str], Poses, list[int], Moved]:
+            """The final association: its detections, reports and keyframes, the movements
+            placed by matching, and those of them the map holds misplaced (as placed)."""
             poses: Poses = estimator.keyframe_poses()
             noise = estimator.noise
             sigma = None if noise is None else noise.sigma_rad
-            left_out = self.associator.place_left_out(
+            left_out, wrong = self.associator.place_left_out(
                 self.keyframe_unique, self.keyframe_blobs, poses, estimator.marginals, sigma
             )
+            poses = {key: pose for key, pose in poses.items() if key[0] not in wrong}
             poses.update(left_out)
             found, reports = self.associator.associate_final(
                 self.keyframe_blobs, poses, estimator.marginals, sigma
             )
-            return found, reports, poses, sorted({m for m, _ in left_out})
+            placed = sorted({m for m, _ in left_out})
+            moved = {
+                m: MovementPose.from_ends(
+                    left_out[m, 0].origin_fl, left_out[m, 0].heading_rad, left_out[m, 1].origin_fl
+                )
+                for m in wrong
+                if (m, 0) in left_out and (m, 1) in left_out
+            }
+            return found, reports, poses, placed, moved
 
-        detections, reports, poses, placed = associate()
+        detections, reports, poses, placed, moved = associate()
         last = max((m for m, _ in self.keyframe_blobs), default=-1)
         retracted: dict[str, str] = {}
         named_at_end: dict[str, str] = {}
         repairs = 0
         for _ in range(RESOLVE_ROUNDS):
-            anew = self._reassigned(detections, set(placed))
-            if anew:  # each name's bearings: its detections with the final map; solved again
-                estimator.rebear(anew)
+            anew = self._reassigned(detections, set(placed) - set(moved))
+            if anew or moved:  # each name's bearings: its detections with the final map
+                estimator.rebear(anew, moved)  # solved again, misplaced movements as matched
                 for name, rays in anew.items():
                     self.given[name] = set(rays)
-                detections, reports, poses, placed = associate()
+                detections, reports, poses, placed, moved = associate()
             repair = None
             if repairs < REPAIR_ROUNDS:
                 repair = self.associator.repair_final(detections, poses, estimator.marginals, last)
@@ -191,7 +204,7 @@ class AlikeLandmarks:
                 estimator.settle()
                 retracted.update(repair.retracted)
                 named_at_end.update(repair.named_at_end)
-                detections, reports, poses, placed = associate()
+                detections, reports, poses, placed, moved = associate()
             elif not anew:
                 break
         noise = estimator.noise
@@ -292,10 +305,10 @@ class AlikeLandmarks:
 class FinalAssociation:
     """What :meth:`AlikeLandmarks.final` found: every keyframe detection with the final map,
     the reports per class, the names retracted and given anew once the log was processed
-    (name -> why; the map changed only then), the movements the map left out that were
-    placed by matching for this association, the free names given then to landmarks the
-    unexplained detections point at (name -> why; the map changed then too), and the names
-    the final association supports weakly (name -> why;
+    (name -> why; the map changed only then), the movements the map left out or held
+    misplaced that were placed by matching for this association, the free names given then to
+    landmarks the unexplained detections point at (name -> why; the map changed then too), and
+    the names the final association supports weakly (name -> why;
     :func:`pipeline.association.final.weak_names`)."""
 
     detections: list[FinalDetection]

@@ -488,6 +488,54 @@ def place_movement(
     return f"placement does not fit the map (robust residual {deg_text(robust)})"
 
 
+def misplaced(
+    unique: Mapping[tuple[int, int], Mapping[str, float]],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    points_fl: NDArray[np.float64],
+    labels: Sequence[str],
+    tol_rad: float,
+) -> set[int]:
+    """The movements a keyframe of which ``poses`` holds where a landmark of a class of its own
+    is seen more than ``tol_rad`` from where the map puts it.
+
+    Parameters
+    ----------
+    unique : dict (movement, end) -> dict name -> bearing (rad)
+        Each keyframe's bearings of landmarks of a class of their own (robot frame).
+    poses : dict (movement, end) -> KeyframePose
+        The keyframes the map holds (FL).
+    points_fl : (k, 2) float
+        The map's landmarks (FL) ...
+    labels : list of str, length k
+        ... and their classes (a landmark of a class of its own under its name).
+    tol_rad : float
+        The largest miss (rad).
+
+    Returns
+    -------
+    set of int
+        The movements: a landmark of a class of its own, seen where no other landmark can be
+        taken for it, contradicts the keyframe's pose (a heading or position the keyframe's
+        other bearings, of look-alike landmarks given the wrong names, hold it at).
+    """
+    where = {label: points_fl[i] for i, label in enumerate(labels)}
+    out: set[int] = set()
+    for (movement, end), bearings in unique.items():
+        pose = poses.get((movement, end))
+        if pose is None or movement in out:
+            continue
+        for name, bearing in bearings.items():
+            point = where.get(name)
+            if point is None:
+                continue
+            d = point - pose.origin_fl
+            seen = math.atan2(float(d[1]), float(d[0])) - pose.heading_rad
+            if abs(float(wrap_rad(bearing - seen))) > tol_rad:
+                out.add(movement)
+                break
+    return out
+
+
 def matching_map(
     mapped: Mapping[str, LandmarkEstimate],
     reference: tuple[str, str],

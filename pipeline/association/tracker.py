@@ -53,6 +53,7 @@ from pipeline.association.match import (
     all_detections,
     match_movement,
     matching_map,
+    misplaced,
     place_left_out,
     place_movement,
 )
@@ -61,6 +62,12 @@ from pipeline.association.result import MovementAssociation, slot_name
 from pipeline.association.support import Support
 from pipeline.estimate import LandmarkEstimate
 from pipeline.geometry import KeyframePose, MovementPose
+
+#: Once the log is processed, a keyframe the map holds is misplaced when a landmark of a class of
+#: its own is seen more than this many eps from where the map puts it: the bound beyond which the
+#: map takes a bearing for a wrong detection (``pipeline.joint.robustness.REJECT_EPS``), here
+#: of a landmark no other can be taken for.
+MISPLACED_EPS = 2.0
 
 
 class Associator:
@@ -312,29 +319,34 @@ class Associator:
         poses: Mapping[tuple[int, int], KeyframePose],
         mapped: Mapping[str, LandmarkEstimate],
         noise_rad: float | None = None,
-    ) -> dict[tuple[int, int], KeyframePose]:
+    ) -> tuple[dict[tuple[int, int], KeyframePose], set[int]]:
         """Once the log is processed: the keyframes of movements the map left out (before the
-        map began, or too few of their detections identified), placed for the association
-        with the final map by matching every detection with it, from a placed neighbour
-        (:func:`pipeline.association.match.place_left_out`).
+        map began, or too few of their detections identified) or holds misplaced (a landmark
+        of a class of its own seen more than :data:`MISPLACED_EPS` eps from where the map puts
+        it: :func:`pipeline.association.match.misplaced`), placed for the association with the
+        final map by matching every detection with it, from a placed neighbour
+        (:func:`pipeline.association.match.place_left_out`); and the misplaced movements.
 
         ``unique``: each keyframe's bearings of landmarks of a class of their own (rad);
         ``detections``: its detections per shared class; ``poses`` and ``mapped``: the final
         map; ``noise_rad``: its bearing noise std (default the one eps implies)."""
         pts, labels = self._matching_map(mapped)
         own = set(labels)
+        wrong = misplaced(unique, poses, pts, labels, MISPLACED_EPS * self.model.eps_rad)
+        held = {key: pose for key, pose in poses.items() if key[0] not in wrong}
         per_keyframe = {
             key: all_detections(unique.get(key, {}), detections.get(key, {}), own)
             for key in set(unique) | set(detections)
         }
-        return place_left_out(
+        placed = place_left_out(
             per_keyframe,
-            poses,
+            held,
             pts,
             labels,
             self.model.eps_rad,
             self.model.sigma_rad if noise_rad is None else noise_rad,
         )
+        return placed, wrong
 
     def repair_final(
         self,

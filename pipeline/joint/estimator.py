@@ -46,7 +46,7 @@ from pipeline.geometry import KeyframePose, MovementPose
 from pipeline.joint import graph as g
 from pipeline.joint import placement, robustness
 from pipeline.joint.frame_spread import frame_spread_cov
-from pipeline.joint.mapgraph import CAREFUL_MOVEMENTS, MapGraph
+from pipeline.joint.mapgraph import CAREFUL_MOVEMENTS, MapGraph, pose2s
 from pipeline.joint.noise import NoiseEstimate, robust_std
 from pipeline.joint.result import JointMovementResult
 from pipeline.joint.state import JointSettings, MapState, Movement
@@ -308,26 +308,41 @@ class JointSlam:
             if movement in self._state.placed:  # a waiting movement brings it when placed
                 self._state.pending.setdefault(name, []).append(bearing)
 
-    def rebear(self, bearings: Mapping[str, Sequence[tuple[int, int, float]]]) -> None:
+    def rebear(
+        self,
+        bearings: Mapping[str, Sequence[tuple[int, int, float]]],
+        moved: Mapping[int, MovementPose] | None = None,
+    ) -> None:
         """Give each landmark of ``bearings`` (in the graph) exactly these bearings
         ``(movement, end, bearing_rad)`` of the placed movements in place of the ones it had
         there (once the log is processed, association with the final map found them), and
         solve the map again from its current values (one rebuild: the landmarks keep their
         points as initial values, so a landmark that holds keyframes in place is never taken
-        out). Landmarks not in the graph, and other movements' bearings, are ignored."""
+        out). Landmarks not in the graph, and other movements' bearings, are ignored.
+
+        ``moved``: placed movements the solve starts from these poses (FL) instead, their
+        bearings rejected until now counted again (once the log is processed, movements the
+        map held misplaced and association placed again by matching)."""
         names = {n for n in bearings if n in self._state.in_graph}
-        if not names or not self._state.placed:
+        again = {m: p for m, p in (moved or {}).items() if m in self._state.placed}
+        if not (names or again) or not self._state.placed:
             return
         for m in self._state.placed.values():
             m.bearings[:] = [b for b in m.bearings if b.landmark not in names]
-        self._state.rejected = {b for b in self._state.rejected if b.landmark not in names}
+        self._state.rejected = {
+            b for b in self._state.rejected if b.landmark not in names and b.movement not in again
+        }
         for name in sorted(names):
             for movement, end, b in bearings[name]:
                 placed = self._state.placed.get(movement)
                 if placed is not None and math.isfinite(b):
                     placed.bearings.append(g.Bearing(movement, end, name, float(b)))
+        values = gtsam.Values(self._map.values)
+        for movement, pose in again.items():
+            for end, pose2 in enumerate(pose2s(pose)):
+                values.update(g.pose_key(movement, end), pose2)
         self._map.retable(self._state)
-        self._map.rebuild(self._state, gtsam.Values(self._map.values))
+        self._map.rebuild(self._state, values)
         robustness.reject_outliers(self._state, self._map)
         self._map.update_estimates(self._state)
 

@@ -29,12 +29,12 @@ map leaves several of its detections unexplained, every name of the class given 
 map once the log is processed is the document's ``landmarks``; and ``weak``: names the final
 association gives a detection at too few of the keyframes where the final map predicts them,
 or whose detections there do not meet at one point, name -> why),
-``placed_by_matching`` (movements the map left out, placed for that association by matching
-their detections with the final map) and, for simulated logs, ``matched_truth`` (each
-``red#k`` matched to the nearest true landmark of its class, one-to-one; ``error_m`` is
-measured against it). ``trust`` says whether the map is ``trustworthy`` and, when not, the
-``reasons`` (:mod:`replay.trust`); with ``--from``/``--to`` the document ends with the
-``window`` processed.
+``placed_by_matching`` (movements the map left out or held misplaced, placed for that
+association by matching their detections with the final map) and, for simulated logs,
+``matched_truth`` (each ``red#k`` matched to the nearest true landmark of its class,
+one-to-one; ``error_m`` is measured against it). ``trust`` says whether the map is
+``trustworthy`` and, when not, the ``reasons`` (:mod:`replay.trust`); with ``--from``/``--to``
+the document ends with the ``window`` processed.
 
 The sink also gives the run's outcome as data, :class:`RunSummary` (what the result line
 says), built from the same records as the document; :meth:`RunSummary.to_json` is the document.
@@ -78,7 +78,7 @@ class FinalAssociation:
     detections, explained : int
         Those detections, and how many of them the final map names or finds in line.
     placed_by_matching : tuple of int
-        Movements the map left out, placed for this association by matching.
+        Movements the map left out or held misplaced, placed for this association by matching.
     named_at_end, retracted : tuple of str
         Names given then: free ones, and ones taken back from another landmark.
     missing : tuple of str

@@ -1,7 +1,8 @@
 """A movement placed by matching its unidentified detections with the map: right on random
 arenas (landmarks alike, some hidden, spurious blobs), refused where the map is symmetric or
-the detections too few, keyframe covariances against Monte Carlo, and movements left out
-placed outward from the placed ones."""
+the detections too few, keyframe covariances against Monte Carlo, movements left out placed
+outward from the placed ones, and keyframes the map holds where a landmark of a class of its own
+is not."""
 
 from __future__ import annotations
 
@@ -11,7 +12,13 @@ import numpy as np
 import pytest
 
 from data_schemas.angles import wrap_rad
-from pipeline.association.match import MATCH_LEAD, MATCH_MIN, match_movement, place_left_out
+from pipeline.association.match import (
+    MATCH_LEAD,
+    MATCH_MIN,
+    match_movement,
+    misplaced,
+    place_left_out,
+)
 from pipeline.geometry import KeyframePose, MovementPose, Sightings, keyframe_poses_of, resect
 
 DEG = math.pi / 180.0
@@ -188,3 +195,41 @@ def test_degenerate_input_is_refused_without_an_error() -> None:
     assert found is None or np.all(np.isfinite(found.fit.pose.o1_fl))
     flat = Sightings(np.zeros((3, 2)), np.array([0, 1, 1]), np.zeros(3))
     assert keyframe_poses_of(flat, MovementPose(np.zeros(2), 0.0, 1.0), SIGMA) is None
+
+
+def test_a_keyframe_its_own_class_landmarks_contradict_is_misplaced() -> None:
+    # the reference pair and a red landmark; bearings worked out by hand from the true
+    # keyframes; the map holds some keyframes turned or moved
+    where = {"L1": (0.0, 0.0), "L2": (1.0, 0.0), "red": (0.5, 1.5)}
+    pts = np.array([where["L1"], where["L2"], where["red"], (2.0, 2.0)])
+    labels = ["L1", "L2", "red", "blue"]
+    truth = {(0, 0): ((0.5, -1.0), 0.3), (0, 1): ((1.2, -0.8), 0.3), (1, 0): ((1.2, -0.8), 2.0)}
+    truth[1, 1] = ((1.2 + 0.6 * math.cos(2.0), -0.8 + 0.6 * math.sin(2.0)), 2.0)
+
+    def bearing(name: str, key: tuple[int, int]) -> float:
+        (x, y), h = truth[key]
+        px, py = where[name]
+        return float(wrap_rad(math.atan2(py - y, px - x) - h))
+
+    unique = {key: {n: bearing(n, key) for n in ("L1", "L2", "red")} for key in truth}
+    unique[0, 0]["L9"] = 1.0  # a landmark the map does not hold: no evidence either way
+    tol = 2.0 * EPS
+    cov = np.eye(3) * 1e-6
+
+    def held(turn: float = 0.0, shift: tuple[float, float] = (0.0, 0.0)) -> dict:
+        """The true keyframes, movement 1's end turned by ``turn`` and moved by ``shift``."""
+        out = {k: KeyframePose(np.array(o, float), h, cov) for k, (o, h) in truth.items()}
+        o, h = truth[1, 1]
+        out[1, 1] = KeyframePose(np.add(o, shift), h + turn, cov)
+        return out
+
+    assert misplaced(unique, held(), pts, labels, tol) == set()
+    assert misplaced(unique, held(turn=tol * 0.9), pts, labels, tol) == set()
+    assert misplaced(unique, held(turn=tol * 1.1), pts, labels, tol) == {1}
+    assert misplaced(unique, held(turn=-math.radians(99.0)), pts, labels, tol) == {1}
+    # moved 0.3 FL: L1, 1 FL away and across the move, is seen 15 degrees off (red 2 degrees)
+    assert misplaced(unique, held(shift=(0.0, -0.3)), pts, labels, tol) == {1}
+    # a keyframe the map does not hold is not judged
+    poses = held(turn=1.0)
+    del poses[1, 1]
+    assert misplaced(unique, poses, pts, labels, tol) == set()

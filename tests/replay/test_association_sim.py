@@ -30,11 +30,13 @@ def _simulated(camera: str, seed: int, folder: Path) -> tuple[Path, Score]:
     return log, score_log(log)
 
 
-def _arena_scored(n: int, size_m: tuple[float, float], seed: int, folder: Path) -> Score:
-    """Simulate ``n`` identical landmarks in an arena of ``size_m`` drawn from ``seed`` (omni
-    camera) into ``folder``; score it."""
+def _arena_scored(
+    n: int, size_m: tuple[float, float], seed: int, folder: Path, camera: str = "omni"
+) -> Score:
+    """Simulate ``n`` identical landmarks in an arena of ``size_m`` drawn from ``seed`` (seen
+    by ``camera``) into ``folder``; score it."""
     log = folder / "run.mcap"
-    simulate(alike_arena(n, "omni", size_m, seed=seed), log, seed=seed)
+    simulate(alike_arena(n, camera, size_m, seed=seed), log, seed=seed)
     return score_log(log)
 
 
@@ -562,3 +564,25 @@ def test_a_map_broken_during_the_run_is_built_again_from_the_first_movement(
     assert max(s.errors_m.values()) <= 0.20, s.errors_m
     right, detections = s.n_final_correct, s.n_final_detections
     assert right >= 0.85 * detections, (right, detections)
+
+
+@pytest.mark.slow  # one simulated 30-movement run of 12 landmarks, 5-10 s
+def test_keyframes_their_own_landmarks_contradict_are_placed_again_for_the_final_association(
+    tmp_path: Path,
+) -> None:
+    # 12 identical landmarks in 4 x 3 m, unwrapped, seed 5: the map holds movements 19-24
+    # where their blue blobs fit other names (a keyframe turned by 99 degrees), and during the
+    # run movements 21-25 see L2 8-23 degrees from where the map puts it. Associated from those
+    # poses, 73 detections were named wrong, 77 % right (main before). A movement held where a
+    # landmark of a class of its own is seen more than 2 eps off is placed again by matching
+    # for the association, and the map is solved again from the poses matched: 9 in 10 right or
+    # more (the truth measured directly), every landmark named within 10 cm. With the map left
+    # where it held them (their detections only kept from the names' bearings), a name ended
+    # 19 cm off
+    s = _arena_scored(12, (4.0, 3.0), 5, tmp_path, camera="unwrapped")
+    l2 = [m["residuals_deg"].get("L2") or [] for m in s.summary["movements"][21:26]]
+    assert all(max(abs(r) for r in pair if r is not None) > 6.0 for pair in l2), l2  # the scenario
+    assert s.n_named == 12 and len(set(s.matched.values())) == 12
+    right, detections = s.n_final_correct, s.n_final_detections
+    assert right >= 0.9 * detections, (right, detections)
+    assert max(s.errors_m.values()) <= 0.10, s.errors_m
