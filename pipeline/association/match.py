@@ -520,19 +520,15 @@ def misplaced(
     """
     where = {label: points_fl[i] for i, label in enumerate(labels)}
     out: set[int] = set()
-    for (movement, end), bearings in unique.items():
-        pose = poses.get((movement, end))
-        if pose is None or movement in out:
+    for key, bearings in unique.items():
+        pose = poses.get(key)
+        names = [n for n in bearings if n in where]
+        if pose is None or not names:
             continue
-        for name, bearing in bearings.items():
-            point = where.get(name)
-            if point is None:
-                continue
-            d = point - pose.origin_fl
-            seen = math.atan2(float(d[1]), float(d[0])) - pose.heading_rad
-            if abs(float(wrap_rad(bearing - seen))) > tol_rad:
-                out.add(movement)
-                break
+        pts = np.array([where[n] for n in names])
+        seen = _bearings(pose.origin_fl[None, :], np.array([pose.heading_rad]), pts)[0]
+        if float(np.abs(wrap_rad(np.array([bearings[n] for n in names]) - seen)).max()) > tol_rad:
+            out.add(key[0])
     return out
 
 

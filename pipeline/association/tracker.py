@@ -65,8 +65,9 @@ from pipeline.geometry import KeyframePose, MovementPose
 
 #: Once the log is processed, a keyframe the map holds is misplaced when a landmark of a class of
 #: its own is seen more than this many eps from where the map puts it: the bound beyond which the
-#: map takes a bearing for a wrong detection (``pipeline.joint.robustness.REJECT_EPS``), here
-#: of a landmark no other can be taken for.
+#: map takes a bearing for a wrong detection (``pipeline.joint.robustness.REJECT_EPS``; a test
+#: holds them equal: association does not import the joint map's GTSAM code), here of a landmark
+#: no other can be taken for.
 MISPLACED_EPS = 2.0
 
 

@@ -19,7 +19,9 @@ from pipeline.association.match import (
     misplaced,
     place_left_out,
 )
+from pipeline.association.tracker import MISPLACED_EPS
 from pipeline.geometry import KeyframePose, MovementPose, Sightings, keyframe_poses_of, resect
+from pipeline.joint.robustness import REJECT_EPS
 
 DEG = math.pi / 180.0
 EPS = 3.0 * DEG
@@ -195,6 +197,10 @@ def test_degenerate_input_is_refused_without_an_error() -> None:
     assert found is None or np.all(np.isfinite(found.fit.pose.o1_fl))
     flat = Sightings(np.zeros((3, 2)), np.array([0, 1, 1]), np.zeros(3))
     assert keyframe_poses_of(flat, MovementPose(np.zeros(2), 0.0, 1.0), SIGMA) is None
+
+
+def test_a_keyframe_is_misplaced_at_the_bound_the_map_rejects_bearings_at() -> None:
+    assert MISPLACED_EPS == REJECT_EPS
 
 
 def test_a_keyframe_its_own_class_landmarks_contradict_is_misplaced() -> None:
