@@ -30,8 +30,8 @@ from pipeline.slam import MovementObservation, MovementResult, MovementStatus
 Poses = dict[tuple[int, int], KeyframePose]
 #: Movements the map holds misplaced, as placed again by matching: movement -> pose (FL).
 Moved = dict[int, MovementPose]
-#: Once the log is processed, the map is repaired (a free name given, a doubtful one retracted
-#: and given, names under suspicion given anew) and associated again at most this many times:
+#: Once the log is processed, the map is repaired (a free name given, the least supported one
+#: moved, names under suspicion given anew) and associated again at most this many times:
 #: a name given frees the detections it explains, and those left may then point at another
 #: landmark.
 REPAIR_ROUNDS = 5
@@ -152,8 +152,8 @@ class AlikeLandmarks:
         bearings in the map become its detections with the final map and the map is solved
         again (:meth:`pipeline.joint.JointSlam.rebear`), and when the unexplained detections
         point at a landmark, a free name of its class is given to it, or with every name given
-        a doubtful one is retracted and given to it, or names under suspicion are given anew
-        where their detections and those meet
+        the one the final map supports least is moved there, or names under suspicion are
+        given anew where their detections and those meet
         (:meth:`pipeline.association.Associator.repair_final`; the estimator settles,
         :meth:`pipeline.joint.JointSlam.settle`); each followed by the association made again,
         until neither changes anything (at most :data:`RESOLVE_ROUNDS` rounds,
@@ -197,7 +197,14 @@ class AlikeLandmarks:
                 detections, reports, poses, placed, moved = associate()
             repair = None
             if repairs < REPAIR_ROUNDS:
-                repair = self.associator.repair_final(detections, poses, estimator.marginals, last)
+                noise = estimator.noise
+                repair = self.associator.repair_final(
+                    detections,
+                    poses,
+                    estimator.marginals,
+                    last,
+                    None if noise is None else noise.sigma_rad,
+                )
             if repair is not None:
                 repairs += 1
                 self._give(repair.retracted, repair.history, estimator)

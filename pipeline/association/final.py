@@ -19,7 +19,9 @@ of it given or not), and where their rays meet (:func:`meeting_point`).
 
 :func:`repair_final` then gives a free name, or the one the final map supports least, to the
 point where those detections meet as the search names a landmark, or gives names under
-suspicion anew where their detections and the unexplained ones meet (:func:`_rebuild`).
+suspicion anew where their detections and the unexplained ones meet (:func:`_rebuild`), or
+moves the least supported name to that point when the final association explains more of the
+class's detections with it there (:func:`_move_least_supported`).
 :func:`weak_names` flags by name what the final map supports weakly: names given few of their
 predicted detections, whose detections do not meet at one point, or that a missing landmark's
 point lines up with from most keyframes (:func:`lined_up`).
@@ -94,7 +96,9 @@ MEETING_CROSSINGS = 5000
 #: one, then the REBUILD_SUSPECTS, the final map does not hold or, after those, gives a
 #: detection at the smallest share of their predictions) are given anew where their detections
 #: and those the final map left unexplained meet, when those points explain REBUILD_GAIN
-#: detections more than the names do.
+#: detections more than the names do; and the least supported name moves to where the
+#: unexplained ones meet when the final map explains REBUILD_GAIN more of the class's detections
+#: with it there.
 REBUILD_SUSPECTS = 2
 REBUILD_GAIN = 8
 #: Once the log is processed, a point the unexplained detections meet at is a named landmark
@@ -580,6 +584,7 @@ def repair_final(
     poses: Mapping[tuple[int, int], KeyframePose],
     mapped: Mapping[str, LandmarkEstimate],
     index: int,
+    noise_rad: float,
 ) -> MovementAssociation | None:
     """Once the log is processed, per class, where the detections the final map leaves
     unexplained meet at one point as a search names a landmark (:func:`_final_point`): with
@@ -588,27 +593,33 @@ def repair_final(
     final map supports least (:func:`_least_supported`: one it does not hold, else the one the
     final association gave a detection at the smallest share of the keyframes where the final
     map predicts it; doubtful or not) is retracted and given to the point, when the point
-    explains more detections than the name does (the likelier of the two). When neither gives a
-    name, names under suspicion may be given anew (:func:`_rebuild`).
+    explains more detections than the name does (the likelier of the two). When neither gives
+    a name, names under suspicion may be given anew (:func:`_rebuild`); failing that too, the
+    least supported name moves to the point when the final association explains
+    :data:`REBUILD_GAIN` more of the class's detections with it there
+    (:func:`_move_least_supported`: the blobs it takes from other names or leaves in line
+    count, not only the point's own rays).
 
     ``names`` holds the names given and gives the new ones, ``final`` is
     :func:`associate_final`'s association, ``poses`` and ``mapped`` the final map, ``index``
-    the last movement. Returns what changed (``retracted``, ``named_at_end``, ``confirmed``,
-    ``history``: the estimator forgets the retracted landmarks, takes the history and
-    settles), or None when nothing did."""
+    the last movement, ``noise_rad`` the bearing noise std ``final`` was made with. Returns
+    what changed (``retracted``, ``named_at_end``, ``confirmed``, ``history``: the estimator
+    forgets the retracted landmarks, takes the history and settles), or None when nothing
+    did."""
     # after the last movement: no ray is its own
     out = MovementAssociation(index + 1, assignment=MovementAssignment(index + 1, {}))
     for label, count in names.capacity.items():
         full = len(names.named[label]) >= count
         given = len(out.confirmed)
         rays = unexplained_rays(final, label, poses)
+        point: tuple[Hypothesis, int] | None = None  # with every name given
         while (found := _final_point(names, label, rays, mapped, final, poses)) is not None:
             h, lines = found
             out.names.setdefault(label, ([], []))
             if full:
                 share, ranked = _least_supported(names, label, final, poses, mapped)
                 weakest = ranked[0]
-                # the name moves only to a point that explains more detections than it does
+                # the name moves to a point that explains more detections than it does
                 given_to = sum(d.name == weakest for d in final)
                 if len(h.rays) > given_to:
                     x, y = h.point_fl
@@ -619,6 +630,8 @@ def repair_final(
                         f"left unexplained meet (it was given {given_to})"
                     )
                     names.give_name(label, h, lines, out, searched=True, retract=weakest, why=why)
+                else:
+                    point = found
                 break
             names.give_name(label, h, lines, out, searched=True)
             x, y = h.point_fl
@@ -633,7 +646,71 @@ def repair_final(
             rays = [r for r in rays if (r.movement, r.end, r.detection) not in h.keys]
         if len(out.confirmed) == given:
             _rebuild(names, label, final, poses, mapped, out)
+        if len(out.confirmed) == given and point is not None:
+            _move_least_supported(names, label, final, poses, mapped, point, noise_rad, out)
     return out if out.confirmed else None
+
+
+def _move_least_supported(
+    names: Lifecycle,
+    label: str,
+    final: Sequence[FinalDetection],
+    poses: Mapping[tuple[int, int], KeyframePose],
+    mapped: Mapping[str, LandmarkEstimate],
+    point: tuple[Hypothesis, int],
+    noise_rad: float,
+    out: MovementAssociation,
+) -> None:
+    """With every name of ``label`` given: the name the final map supports least
+    (:func:`_least_supported`) goes to ``point`` (where the unexplained detections meet, and
+    its lines of sight) when the final map explains :data:`REBUILD_GAIN` more of the class's
+    detections with it there (:func:`_explained_if_moved`)."""
+    h, lines = point
+    share, ranked = _least_supported(names, label, final, poses, mapped)
+    weakest = ranked[0]
+    before, after = _explained_if_moved(final, label, poses, mapped, names, weakest, h, noise_rad)
+    if after < before + REBUILD_GAIN:
+        return
+    x, y = h.point_fl
+    doubt = names.support[weakest].doubt()
+    why = (
+        f"{f'{doubt}; ' if doubt else ''}"
+        f"{_support_text(weakest, share, mapped)}, the least of {label}; "
+        f"retracted once the log was processed: the name goes to ({x:.2f}, {y:.2f}) FL, where "
+        f"{len(h.rays)} detections the final map left unexplained meet; with it there the "
+        f"final map explains {after} detections of {label}, against {before}"
+    )
+    names.give_name(label, h, lines, out, searched=True, retract=weakest, why=why)
+
+
+def _explained_if_moved(
+    final: Sequence[FinalDetection],
+    label: str,
+    poses: Mapping[tuple[int, int], KeyframePose],
+    mapped: Mapping[str, LandmarkEstimate],
+    names: Lifecycle,
+    name: str,
+    h: Hypothesis,
+    noise_rad: float,
+) -> tuple[int, int]:
+    """How many detections of ``label`` the final association (``final``, with the final map
+    ``poses`` and ``mapped`` under the names of ``names``) explains (named or in line) as it
+    is, and with ``name`` moved to the point of ``h`` (its covariance too), the map otherwise
+    as it is: (before, after)."""
+    explained = (Status.NAMED, Status.IN_LINE)
+    own = [d for d in final if d.label == label]
+    detections: dict[tuple[int, int], dict[str, list[float]]] = {}
+    for d in own:
+        detections.setdefault((d.movement, d.end), {}).setdefault(label, []).append(d.bearing_rad)
+    known = [
+        (n, LandmarkEstimate(h.point_fl, h.cov_fl) if n == name else mapped[n])
+        for n in names.named[label]
+        if n == name or n in mapped
+    ]
+    moved = associate_final(
+        detections, poses, {label: known}, noise_rad=noise_rad, eps_rad=names.model.eps_rad
+    )
+    return sum(d.status in explained for d in own), sum(d.status in explained for d in moved)
 
 
 def _rebuild(

@@ -355,9 +355,12 @@ class Associator:
         poses: Mapping[tuple[int, int], KeyframePose],
         mapped: Mapping[str, LandmarkEstimate],
         index: int,
+        noise_rad: float | None = None,
     ) -> MovementAssociation | None:
         """Once the log is processed, give names where the detections the final map leaves
         unexplained meet (:func:`pipeline.association.final.repair_final`): ``final`` is
         :meth:`associate_final`'s association, ``poses`` and ``mapped`` the final map,
-        ``index`` the last movement. Returns what changed, or None when nothing did."""
-        return repair_final(self.lifecycle, final, poses, mapped, index)
+        ``index`` the last movement, ``noise_rad`` the bearing noise std it was made with
+        (default the one eps implies). Returns what changed, or None when nothing did."""
+        sigma = self.model.sigma_rad if noise_rad is None else noise_rad
+        return repair_final(self.lifecycle, final, poses, mapped, index, sigma)

@@ -14,6 +14,7 @@ from pipeline.association.final import (
     MISSING_UNEXPLAINED,
     FinalDetection,
     Status,
+    _explained_if_moved,
     associate_final,
     meeting_point,
     missing_reports,
@@ -594,3 +595,47 @@ def test_a_name_a_missing_landmark_lines_up_with_from_most_keyframes_is_weak() -
     final, poses = _seen_from_afar(name_fl, missing, rng)
     kept = [d for d in final if d.status == Status.NAMED or d.movement == 0]
     assert weak_names(kept, poses, {"blue#1": e}, ["blue#1"], **kw) == {}
+
+
+def test_a_name_moved_onto_a_landmark_counts_the_blobs_it_takes_from_a_neighbour() -> None:
+    # B stands 10 cm (0.1 FL) from A (blue#1); blue#2 stands in open space. From 6 keyframes
+    # 1 FL away the two are 5-6 degrees apart: A's blob is named, B's left unexplained. From 10
+    # keyframes 3.4 FL away they are 1.6-1.7 degrees apart (blobs without noise, 1 degree of
+    # bearing noise assumed): A's gate holds both blobs and neither assignment is clearly the
+    # better, so both are contested. The final map explains 6 detections; with blue#2 on B it
+    # names all 32: 26 more, where the point's own unexplained rays number only 6
+    a, b = np.array([0.0, 0.0]), np.array([0.0, 0.1])
+    near = [np.array([-1.0, 0.05 + y]) for y in np.linspace(-0.3, 0.3, 6)]
+    far = [np.array([-3.4, 0.05 + y]) for y in np.linspace(-0.4, 0.4, 10)]
+    origins = near + far
+    detections: dict[tuple[int, int], dict[str, list[float]]] = {}
+    poses = {}
+    for k, origin in enumerate(origins):
+        key = (k // 2, k % 2)
+        poses[key] = KeyframePose(origin, 0.0, 1e-8 * np.eye(3))
+        detections[key] = {
+            "blue": [math.atan2(*(p - origin)[::-1]) for p in (a, b)]  # heading 0
+        }
+    seps = [abs(d["blue"][1] - d["blue"][0]) / DEG for d in detections.values()]
+    assert all(5.0 < x < 6.0 for x in seps[:6]) and all(1.55 < x < 1.75 for x in seps[6:])
+    assoc, mapped = _full_class({"blue#1": a, "blue#2": np.array([4.0, 4.0])})
+    final = associate_final(
+        detections,
+        poses,
+        {"blue": [(n, mapped[n]) for n in ("blue#1", "blue#2")]},
+        noise_rad=DEG,
+        eps_rad=3 * DEG,
+    )
+    status = [d.status for d in final]
+    assert status[:12] == ["named", "unexplained"] * 6  # the scenario
+    assert set(status[12:]) == {"contested"}
+    rays = [
+        Ray.placed(k // 2, k % 2, 1, math.atan2(*(b - o)[::-1]), o, 0.0)
+        for k, o in enumerate(origins)
+    ]
+    h = fit("blue", rays, 3.0 * DEG, 1.0 * DEG, b)
+    assert h is not None and np.linalg.norm(h.point_fl - b) < 1e-6
+    before, after = _explained_if_moved(
+        final, "blue", poses, mapped, assoc.lifecycle, "blue#2", h, DEG
+    )
+    assert (before, after) == (6, 32)

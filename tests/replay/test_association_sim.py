@@ -537,11 +537,14 @@ def test_the_name_the_final_map_supports_least_goes_to_the_landmark_it_kept_out(
     # run, so a rule that retracts only doubtful names retracted a right one instead (main
     # before: blue#13, 3 cm off) and the ghost stayed 2.2 m off; 78 % of the detections right.
     # Retracting the name the final map supports least, when the point explains more
-    # detections than it, puts that name on the landmark (the truth measured directly)
+    # detections than it, puts that name on the landmark (the truth measured directly). (A
+    # second name, 1.6 m off, then moves where the final map explains 25 more detections of
+    # the class; it ends 86 cm off, flagged)
     s = _arena_scored(16, (5.0, 4.0), 4, tmp_path)
     retracted = _retracted_at_end(s)
-    assert len(retracted) == 1, retracted
-    ((name, why),) = retracted.items()
+    counted = {n: w for n, w in retracted.items() if "left unexplained meet (it was given" in w}
+    assert len(counted) == 1, retracted
+    ((name, why),) = counted.items()
     assert "the least of blue" in why
     assert name not in _doubtful_last(s)  # the old rule could not choose it
     assert s.errors_m[name] <= 0.10, s.errors_m
@@ -586,3 +589,25 @@ def test_keyframes_their_own_landmarks_contradict_are_placed_again_for_the_final
     right, detections = s.n_final_correct, s.n_final_detections
     assert right >= 0.9 * detections, (right, detections)
     assert max(s.errors_m.values()) <= 0.10, s.errors_m
+
+
+@pytest.mark.slow  # one simulated 30-movement run of 16 landmarks, 10-20 s
+def test_a_name_moves_to_a_landmark_whose_blobs_a_named_neighbour_contests(
+    tmp_path: Path,
+) -> None:
+    # 16 identical landmarks in 5 x 4 m, omni, seed 26: blue#3 stands where rays of several
+    # landmarks meet, 2.1 m from the landmark the scoring pairs it with, given a detection at
+    # 42 % of the keyframes where the map predicts it. The landmark it keeps out of the map
+    # stands 31 cm from blue#12's and lies in its gate from 41 of 60 keyframes, so most of its
+    # blobs are contested with or in line with blue#12's; only 24 are unexplained, fewer than
+    # the 25 detections blue#3 had, and they do not meet with blue#3's own. Counting those 24
+    # alone, the name stayed (main before: 800 of 871 right). With the name there, the final
+    # map explains 36 more detections: it moves there, and every name ends within 10 cm of its
+    # landmark (the truth measured directly)
+    s = _arena_scored(16, (5.0, 4.0), 26, tmp_path)
+    why = _retracted_at_end(s)["blue#3"]
+    assert "left unexplained meet; with it there the final map explains" in why
+    assert s.n_named == 16 and len(set(s.matched.values())) == 16
+    assert max(s.errors_m.values()) <= 0.10, s.errors_m
+    right, detections = s.n_final_correct, s.n_final_detections
+    assert right >= 0.97 * detections, (right, detections)
