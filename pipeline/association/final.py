@@ -619,7 +619,7 @@ def repair_final(
             if full:
                 share, ranked = _least_supported(names, label, final, poses, mapped)
                 weakest = ranked[0]
-                # the name moves to a point that explains more detections than it does
+                # the name moves only to a point that explains more detections than it does
                 given_to = sum(d.name == weakest for d in final)
                 if len(h.rays) > given_to:
                     x, y = h.point_fl
@@ -664,11 +664,11 @@ def _move_least_supported(
     """With every name of ``label`` given: the name the final map supports least
     (:func:`_least_supported`) goes to ``point`` (where the unexplained detections meet, and
     its lines of sight) when the final map explains :data:`REBUILD_GAIN` more of the class's
-    detections with it there (:func:`_explained_if_moved`)."""
+    detections with it there (:func:`explained_if_moved`)."""
     h, lines = point
     share, ranked = _least_supported(names, label, final, poses, mapped)
     weakest = ranked[0]
-    before, after = _explained_if_moved(final, label, poses, mapped, names, weakest, h, noise_rad)
+    before, after = explained_if_moved(final, label, poses, mapped, names, weakest, h, noise_rad)
     if after < before + REBUILD_GAIN:
         return
     x, y = h.point_fl
@@ -683,7 +683,7 @@ def _move_least_supported(
     names.give_name(label, h, lines, out, searched=True, retract=weakest, why=why)
 
 
-def _explained_if_moved(
+def explained_if_moved(
     final: Sequence[FinalDetection],
     label: str,
     poses: Mapping[tuple[int, int], KeyframePose],

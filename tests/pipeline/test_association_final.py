@@ -14,8 +14,8 @@ from pipeline.association.final import (
     MISSING_UNEXPLAINED,
     FinalDetection,
     Status,
-    _explained_if_moved,
     associate_final,
+    explained_if_moved,
     meeting_point,
     missing_reports,
     weak_names,
@@ -635,7 +635,7 @@ def test_a_name_moved_onto_a_landmark_counts_the_blobs_it_takes_from_a_neighbour
     ]
     h = fit("blue", rays, 3.0 * DEG, 1.0 * DEG, b)
     assert h is not None and np.linalg.norm(h.point_fl - b) < 1e-6
-    before, after = _explained_if_moved(
+    before, after = explained_if_moved(
         final, "blue", poses, mapped, assoc.lifecycle, "blue#2", h, DEG
     )
     assert (before, after) == (6, 32)
