@@ -159,12 +159,16 @@ class AlikeLandmarks:
         until neither changes anything (at most :data:`RESOLVE_ROUNDS` rounds,
         :data:`REPAIR_ROUNDS` repairs)."""
 
+        def noise_rad() -> float | None:
+            """The map's bearing noise std as it stands (None: not estimated)."""
+            noise = estimator.noise
+            return None if noise is None else noise.sigma_rad
+
         def associate() -> tuple[list[FinalDetection], dict[str, str], Poses, list[int], Moved]:
             """The final association: its detections, reports and keyframes, the movements
             placed by matching, and those of them the map holds misplaced (as placed)."""
             poses: Poses = estimator.keyframe_poses()
-            noise = estimator.noise
-            sigma = None if noise is None else noise.sigma_rad
+            sigma = noise_rad()
             left_out, wrong = self.associator.place_left_out(
                 self.keyframe_unique, self.keyframe_blobs, poses, estimator.marginals, sigma
             )
@@ -197,13 +201,8 @@ class AlikeLandmarks:
                 detections, reports, poses, placed, moved = associate()
             repair = None
             if repairs < REPAIR_ROUNDS:
-                noise = estimator.noise
                 repair = self.associator.repair_final(
-                    detections,
-                    poses,
-                    estimator.marginals,
-                    last,
-                    None if noise is None else noise.sigma_rad,
+                    detections, poses, estimator.marginals, last, noise_rad()
                 )
             if repair is not None:
                 repairs += 1
@@ -214,13 +213,13 @@ class AlikeLandmarks:
                 detections, reports, poses, placed, moved = associate()
             elif not anew:
                 break
-        noise = estimator.noise
+        sigma = noise_rad()
         weak = weak_names(
             detections,
             poses,
             estimator.marginals,
             [n for names in self.associator.named.values() for n in names],
-            noise_rad=self.associator.model.sigma_rad if noise is None else noise.sigma_rad,
+            noise_rad=self.associator.model.sigma_rad if sigma is None else sigma,
             eps_rad=self.associator.model.eps_rad,
         )
         return FinalAssociation(detections, reports, retracted, placed, named_at_end, weak)
